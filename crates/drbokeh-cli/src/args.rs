@@ -1,0 +1,297 @@
+//! Arguments shared by every command that renders: scene input, camera, model, execution.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use drbokeh::io::{self, DepthKind, DisparityOptions};
+use drbokeh::{Aperture, Camera, LayerStack, Preset, Real, RenderSettings, Window};
+use std::path::{Path, PathBuf};
+
+/// Where the scene comes from.
+#[derive(Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Layer stack (NPZ with rgb (N,H,W,3), alpha (N,H,W), disparity (N,H,W); front first).
+    #[arg(long, value_name = "STACK.npz", conflicts_with_all = ["image", "demo"])]
+    pub layers: Option<PathBuf>,
+
+    /// All-in-focus image (PNG 8/16-bit, JPEG, TIFF, or linear EXR). Needs --disparity or --depth.
+    #[arg(long, value_name = "IMAGE", conflicts_with = "demo")]
+    pub image: Option<PathBuf>,
+
+    /// Disparity map for --image (larger = nearer): 16-bit PNG, EXR, NPY, or NPZ key `data`.
+    #[arg(long, value_name = "MAP", requires = "image", conflicts_with = "depth")]
+    pub disparity: Option<PathBuf>,
+
+    /// Metric depth map for --image (larger = farther); converted to disparity 1/z.
+    #[arg(long, value_name = "MAP", requires = "image")]
+    pub depth: Option<PathBuf>,
+
+    /// What the map holds; overrides the choice implied by --disparity/--depth.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub depth_kind: Option<DepthKindArg>,
+
+    /// Keep the map's values instead of min-max normalising disparity to [0, 1].
+    #[arg(long)]
+    pub no_normalize: bool,
+
+    /// Alpha matte for --image (grey image, or the alpha of an RGBA PNG): renders the
+    /// paper's two-layer stack (foreground = matte, background filled in behind it).
+    #[arg(long, value_name = "MATTE", requires = "image")]
+    pub alpha: Option<PathBuf>,
+
+    /// Render the built-in procedural demo scene (no files needed).
+    #[arg(long)]
+    pub demo: bool,
+
+    /// Size of the demo scene, WIDTHxHEIGHT.
+    #[arg(long, value_name = "WxH", default_value = "640x426", requires = "demo")]
+    pub demo_size: String,
+}
+
+/// What a depth/disparity map holds.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum DepthKindArg {
+    /// Disparity, larger = nearer.
+    Disparity,
+    /// Metric depth, larger = farther.
+    Depth,
+}
+
+/// Camera and model controls.
+#[derive(Args, Debug, Clone)]
+pub struct CameraArgs {
+    /// Focus disparity in [0, 1] (the normalised disparity that is sharp).
+    #[arg(long, value_name = "F", conflicts_with = "focus_at")]
+    pub focus: Option<f64>,
+
+    /// Tap to focus: focus on the disparity at pixel X,Y (frontmost layer with alpha >= 0.5).
+    /// Without --focus or --focus-at, the demo focuses on its subject and other inputs on
+    /// the centre pixel.
+    #[arg(long, value_name = "X,Y")]
+    pub focus_at: Option<String>,
+
+    /// Blur strength K: blur radius in pixels per unit of relative disparity.
+    #[arg(long = "blur", value_name = "K", default_value_t = 30.0)]
+    pub blur_k: f64,
+
+    /// Window size L (odd, L = 2R + 1): the largest neighbourhood a pixel gathers from.
+    /// Default: just large enough for the largest blur radius in the image, at most 71
+    /// (the paper's demo setting); larger blurs are clipped unless you ask for more (max 1001).
+    #[arg(long, value_name = "L")]
+    pub window: Option<usize>,
+
+    /// Gamma of the display encoding (linear = (encoded + offset)^gamma).
+    #[arg(long, default_value_t = 2.2)]
+    pub gamma: f64,
+
+    /// Offset of the display encoding.
+    #[arg(long, default_value_t = 0.0)]
+    pub offset: f64,
+
+    /// Boost bright, defocused highlights (brighter bokeh balls), as in the paper's tool.
+    #[arg(long)]
+    pub highlight: bool,
+
+    /// Aperture shape: circle, polygon:N[:DEG] (N blades rotated by DEG degrees), a name
+    /// (triangle, square, pentagon, hexagon, heptagon, octagon), or kernel:IMAGE (a grey
+    /// image of the bokeh shape).
+    #[arg(long, default_value = "circle", value_name = "SHAPE")]
+    pub aperture: String,
+
+    /// Model preset. paper: the published Dr.Bokeh model, exactly.
+    #[arg(long, default_value = "paper", value_name = "NAME")]
+    pub preset: String,
+}
+
+/// How the work is executed.
+#[derive(Args, Debug, Clone)]
+pub struct ExecArgs {
+    /// Compute in double precision (slower; for exactness checks).
+    #[arg(long)]
+    pub f64: bool,
+
+    /// Number of worker threads (default: all cores). Output does not depend on it.
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+
+    /// Execution engine: threaded (default) or reference (plain loops, the oracle; slow).
+    #[arg(long, default_value = "threaded", value_name = "ENGINE")]
+    pub engine: String,
+
+    /// No progress bar or notes on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+impl ExecArgs {
+    /// Sets up the global thread pool.
+    pub fn init_threads(&self) -> Result<()> {
+        if let Some(n) = self.threads {
+            if n == 0 || n > 1024 {
+                bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
+            }
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build_global()
+                .context("cannot start the thread pool")?;
+        }
+        Ok(())
+    }
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("invalid parameter --demo-size: expected WxH, got '{s}'"))?;
+    let parse = |v: &str| -> Result<usize> {
+        v.trim()
+            .parse()
+            .with_context(|| format!("invalid parameter --demo-size: bad number '{v}'"))
+    };
+    let (w, h) = (parse(w)?, parse(h)?);
+    drbokeh::image::check_dimensions("--demo-size", w, h)?;
+    Ok((w, h))
+}
+
+/// Loads the scene as a layer stack.
+pub fn load_scene<T: Real>(a: &SceneArgs, gamma: f64, offset: f64) -> Result<LayerStack<T>> {
+    if a.demo {
+        let (w, h) = parse_size(&a.demo_size)?;
+        return Ok(drbokeh::demo::scene(w, h));
+    }
+    if let Some(p) = &a.layers {
+        return Ok(io::read_stack(p)?);
+    }
+    let Some(image_path) = &a.image else {
+        bail!("no scene given: use --layers STACK.npz, --image IMAGE --disparity MAP, or --demo");
+    };
+    let (map_path, implied) = match (&a.disparity, &a.depth) {
+        (Some(p), None) => (p, DepthKind::Disparity),
+        (None, Some(p)) => (p, DepthKind::Depth),
+        _ => bail!("--image needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"),
+    };
+    let kind = match a.depth_kind {
+        Some(DepthKindArg::Disparity) => DepthKind::Disparity,
+        Some(DepthKindArg::Depth) => DepthKind::Depth,
+        None => implied,
+    };
+    let mut rgb: drbokeh::Image<T> = io::read_rgb(image_path)?;
+    if image_path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        // Linear EXR colour: encode with the same transfer the renderer will undo.
+        for v in rgb.data.iter_mut() {
+            *v = T::c(drbokeh::model::encode(v.f64(), gamma, offset).max(0.0));
+        }
+    }
+    let disparity = io::read_disparity(
+        map_path,
+        DisparityOptions {
+            kind,
+            normalize: !a.no_normalize,
+        },
+    )?;
+    check_same_size(image_path, &rgb, map_path, &disparity)?;
+    match &a.alpha {
+        None => Ok(LayerStack::single(rgb, disparity)?),
+        Some(matte_path) => {
+            let matte = io::read_matte(matte_path)?;
+            check_same_size(image_path, &rgb, matte_path, &matte)?;
+            Ok(drbokeh::layering::two_layers_from_matte(
+                &rgb, &disparity, &matte,
+            )?)
+        }
+    }
+}
+
+fn check_same_size<A, B>(
+    a_path: &Path,
+    a: &drbokeh::Image<A>,
+    b_path: &Path,
+    b: &drbokeh::Image<B>,
+) -> Result<()> {
+    if a.width != b.width || a.height != b.height {
+        bail!(
+            "{}: size {}x{} does not match {} ({}x{})",
+            b_path.display(),
+            b.width,
+            b.height,
+            a_path.display(),
+            a.width,
+            a.height
+        );
+    }
+    Ok(())
+}
+
+/// Resolves the camera, aperture and preset for a loaded stack. Returns the settings and,
+/// when the automatic window clips the largest blur, a note for the user.
+pub fn settings_for<T: Real>(
+    c: &CameraArgs,
+    scene: &SceneArgs,
+    stack: &LayerStack<T>,
+) -> Result<(RenderSettings, Option<String>)> {
+    let focus = match (c.focus, &c.focus_at) {
+        (Some(f), _) => f,
+        (None, Some(xy)) => {
+            let (x, y) = xy
+                .split_once(',')
+                .and_then(|(x, y)| Some((x.trim().parse().ok()?, y.trim().parse().ok()?)))
+                .with_context(|| {
+                    format!(
+                        "invalid parameter --focus-at: expected X,Y pixel coordinates, got '{xy}'"
+                    )
+                })?;
+            stack.disparity_at(x, y)?
+        }
+        (None, None) if scene.demo => drbokeh::demo::DEMO_FOCUS,
+        (None, None) => stack.disparity_at(stack.width / 2, stack.height / 2)?,
+    };
+    let aperture = match c.aperture.strip_prefix("kernel:") {
+        Some(path) => {
+            let grey = io::read_grey::<f64>(Path::new(path), "aperture kernel")?;
+            Aperture::Kernel(
+                drbokeh::aperture::KernelImage::new(&grey)
+                    .map_err(|e| e.in_file(Path::new(path)))?,
+            )
+        }
+        None => Aperture::parse_shape(&c.aperture)?,
+    };
+    let preset: Preset = c.preset.parse()?;
+    let mut note = None;
+    let window = match c.window {
+        Some(l) => Window::from_size(l)?,
+        None => {
+            if !(0.0..=1.0).contains(&focus) || !focus.is_finite() {
+                // Let validation below report it.
+                Window::auto(1.0)
+            } else {
+                let needed = c.blur_k.abs() * stack.max_defocus(focus) + 1.0;
+                let w = Window::auto(needed);
+                if needed + drbokeh::camera::AUTO_WINDOW_MARGIN_PX > w.radius_px() as f64 + 0.5 {
+                    note = Some(format!(
+                        "largest blur radius is {needed:.1} px but the automatic window is capped at L = {} (R = {}); pass --window {} for unclipped bokeh",
+                        w.size(),
+                        w.radius_px(),
+                        2 * (needed + drbokeh::camera::AUTO_WINDOW_MARGIN_PX).ceil() as usize + 1
+                    ));
+                }
+                w
+            }
+        }
+    };
+    let settings = RenderSettings {
+        camera: Camera {
+            focus_disparity: focus,
+            blur_k: c.blur_k,
+            window,
+            gamma: c.gamma,
+            offset: c.offset,
+            highlight: c.highlight,
+        },
+        aperture,
+        preset,
+    };
+    settings.validate()?;
+    Ok((settings, note))
+}

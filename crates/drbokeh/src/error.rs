@@ -1,0 +1,74 @@
+//! The library's error type. Every failure caused by user input is an [`Error`], never a panic.
+
+use std::path::PathBuf;
+
+/// Errors returned by the drbokeh library.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An input is malformed: wrong shape, wrong channel count, non-finite value, bad range.
+    #[error("{what}: {problem}")]
+    InvalidInput {
+        /// What was being validated (a file name, a parameter name, a layer).
+        what: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A parameter (camera, aperture, window) is out of its valid range.
+    #[error("invalid parameter {name}: {problem}")]
+    InvalidParameter {
+        /// The parameter's name as the user knows it (e.g. `--focus`).
+        name: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A file could not be read, decoded or written.
+    #[error("{}: {problem}", path.display())]
+    File {
+        /// The file concerned.
+        path: PathBuf,
+        /// What went wrong.
+        problem: String,
+    },
+}
+
+/// Result alias used throughout the library.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// An [`Error::InvalidInput`] about `what`.
+    pub fn input(what: impl Into<String>, problem: impl Into<String>) -> Self {
+        Error::InvalidInput {
+            what: what.into(),
+            problem: problem.into(),
+        }
+    }
+
+    /// An [`Error::InvalidParameter`] about parameter `name`.
+    pub fn param(name: impl Into<String>, problem: impl Into<String>) -> Self {
+        Error::InvalidParameter {
+            name: name.into(),
+            problem: problem.into(),
+        }
+    }
+
+    /// An [`Error::File`] about `path`.
+    pub fn file(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+        Error::File {
+            path: path.into(),
+            problem: problem.into(),
+        }
+    }
+
+    /// Re-labels an input error with the file it came from, so messages name the file.
+    pub fn in_file(self, path: &std::path::Path) -> Self {
+        match self {
+            Error::InvalidInput { what, problem } => {
+                Error::file(path, format!("{what}: {problem}"))
+            }
+            Error::InvalidParameter { name, problem } => {
+                Error::file(path, format!("{name}: {problem}"))
+            }
+            other => other,
+        }
+    }
+}

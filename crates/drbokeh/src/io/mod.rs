@@ -1,0 +1,58 @@
+//! Reading and writing: layer stacks (NPZ), images (PNG/JPEG/TIFF/EXR), depth maps
+//! (PNG/EXR/NPY/NPZ) and rendered outputs. Every reader validates what it returns and
+//! names the file in its errors; every writer writes to a temporary file beside the
+//! target and renames it, so a failed write leaves no partial output.
+
+mod depth;
+mod npz;
+mod raster;
+
+pub use depth::{read_disparity, DepthKind, DisparityOptions};
+pub use npz::{read_stack, write_stack};
+pub use raster::{read_grey, read_matte, read_rgb, write_output, BitDepth, OutputFormat};
+
+use crate::{Error, Result};
+use std::io::Write;
+use std::path::Path;
+
+/// Writes a file atomically: `fill` writes into a temporary file in the target's directory,
+/// which is renamed over `path` only if `fill` succeeds.
+pub fn write_atomic(
+    path: &Path,
+    fill: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> Result<()>,
+) -> Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(Error::file(path, "output directory does not exist"));
+    }
+    let tmp = tempfile::Builder::new()
+        .prefix(".drbokeh-")
+        .suffix(".part")
+        .tempfile_in(dir)
+        .map_err(|e| Error::file(path, format!("cannot create temporary file: {e}")))?;
+    {
+        let mut w = std::io::BufWriter::new(tmp.as_file());
+        fill(&mut w)?;
+        w.flush()
+            .map_err(|e| Error::file(path, format!("write failed: {e}")))?;
+    }
+    tmp.persist(path)
+        .map_err(|e| Error::file(path, format!("cannot rename into place: {}", e.error)))?;
+    Ok(())
+}
+
+/// Opens a file for reading with a message naming it on failure.
+pub(crate) fn open(path: &Path) -> Result<std::fs::File> {
+    std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))
+}
+
+/// The lower-cased extension of a path ("" if none).
+pub(crate) fn extension(path: &Path) -> String {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
+}

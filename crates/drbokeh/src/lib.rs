@@ -1,0 +1,37 @@
+//! # drbokeh
+//!
+//! Differentiable, occlusion-aware bokeh rendering (Dr.Bokeh) in Rust. A [`LayerStack`]
+//! (layers front to back: colour, alpha, disparity) is rendered by the soft scatter model
+//! of [`model`], evaluated by an [`engine`], and composited front to back.
+//!
+//! ```
+//! use drbokeh::{render, Engine, Layer, LayerStack, NoProgress, RenderSettings};
+//! let background = Layer::<f32>::constant(32, 32, [0.2, 0.4, 0.8], 1.0, 0.1);
+//! let stack = LayerStack::new(vec![background]).unwrap();
+//! let mut settings = RenderSettings::paper(0.5);
+//! settings.camera.window = drbokeh::Window::from_size(21).unwrap();
+//! let out = render(&stack, &settings, Engine::Threaded, &NoProgress).unwrap();
+//! assert!((out.at(5, 5, 2) - 0.8).abs() < 1e-4);
+//! ```
+
+pub mod aperture;
+pub mod camera;
+pub mod demo;
+pub mod engine;
+mod error;
+pub mod image;
+pub mod io;
+pub mod layering;
+pub mod model;
+pub mod presets;
+mod real;
+pub mod stack;
+
+pub use aperture::Aperture;
+pub use camera::{Camera, Window};
+pub use engine::{render, Engine, NoProgress, Progress};
+pub use error::{Error, Result};
+pub use image::Image;
+pub use presets::{Preset, RenderSettings};
+pub use real::Real;
+pub use stack::{Layer, LayerStack};

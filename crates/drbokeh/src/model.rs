@@ -1,0 +1,274 @@
+//! THE EQUATION, once. Every term of `shared/spec/rendering-model.md` is a function here;
+//! engines (reference, threaded, ...) call these and never re-derive them.
+//!
+//! Notation (spec): `d(y) = disp(y) - f` relative disparity, `r(y) = K|d(y)| + 1` scatter
+//! radius in pixels, `S` soft scatter, `A = r^2` area, `O` soft occlusion, `c(y,x)` tap
+//! weight, `B_l` layer colour, `o_l` layer coverage, `T_l` transmittance.
+
+use crate::aperture::{Aperture, ApertureEval};
+use crate::camera::Camera;
+use crate::stack::Layer;
+use crate::Real;
+
+/// The regulariser in `B = C / (W + 1e-8)`.
+pub const WEIGHT_EPSILON: f64 = 1e-8;
+
+/// Relative disparity `d = disp - f` (spec: "Relative disparity").
+#[inline(always)]
+pub fn relative_disparity<T: Real>(disparity: T, focus: T) -> T {
+    disparity - focus
+}
+
+/// Scatter radius in pixels `r = K |d| + 1` (the +1 is the pixel footprint).
+#[inline(always)]
+pub fn scatter_radius_px<T: Real>(blur_k: T, rel_disp: T) -> T {
+    blur_k * rel_disp.abs() + T::one()
+}
+
+/// Soft scatter step `S = 1 / (1 + 10 exp(-3 (r - dist)))` (supplement eq. 2, distance not
+/// squared), as a function of `r - dist`.
+#[inline(always)]
+pub fn soft_step<T: Real>(r_minus_dist: T) -> T {
+    T::one() / (T::one() + T::c(10.0) * (T::c(-3.0) * r_minus_dist).exp())
+}
+
+/// Area normalisation `A = r^2`.
+#[inline(always)]
+pub fn area<T: Real>(radius_px: T) -> T {
+    radius_px * radius_px
+}
+
+/// Window mask `M(x - y) = 1` iff `dist < R` (strict).
+#[inline(always)]
+pub fn in_window(dx: isize, dy: isize, window_radius_px: usize) -> bool {
+    ((dx * dx + dy * dy) as f64).sqrt() < window_radius_px as f64
+}
+
+/// Focus weight of a receiver `e(x) = exp(-3 (K d(x))^2)`: 1 in focus, 0 when very blurred.
+#[inline(always)]
+pub fn focus_weight<T: Real>(blur_k: T, rel_disp_x: T) -> T {
+    let kd = blur_k * rel_disp_x;
+    (T::c(-3.0) * kd * kd).exp()
+}
+
+/// Depth step `s(D) = 1/2 + 1/2 tanh(10 (D - 0.1))`.
+#[inline(always)]
+pub fn depth_step<T: Real>(disp_difference: T) -> T {
+    T::c(0.5) + T::c(0.5) * (T::c(10.0) * (disp_difference - T::c(0.1))).tanh()
+}
+
+/// Soft occlusion `O(y,x) = 1 + e(x) (s(d(y) - d(x)) - 1)` (supplement eq. 1 with its sign
+/// slip corrected); the centre tap has `O(x,x) = 1`, which callers handle.
+#[inline(always)]
+pub fn occlusion<T: Real>(focus_weight_x: T, rel_disp_y: T, rel_disp_x: T) -> T {
+    T::one() + focus_weight_x * (depth_step(rel_disp_y - rel_disp_x) - T::one())
+}
+
+/// Half-size of the paper's coverage box: `min(floor(r(x) / 2), R)`.
+#[inline(always)]
+pub fn coverage_half_size_px<T: Real>(radius_x_px: T, window_radius_px: usize) -> usize {
+    let h = (radius_x_px.f64() / 2.0).floor();
+    (h.max(0.0) as usize).min(window_radius_px)
+}
+
+/// Layer coverage `o(x)`: the mean of alpha over the square of half-size `h` around x.
+/// `alpha_at(dx, dy)` returns alpha at offset (dx, dy) from x (borders already handled).
+#[inline]
+pub fn box_coverage<T: Real>(half_size_px: usize, alpha_at: impl Fn(isize, isize) -> T) -> T {
+    let h = half_size_px as isize;
+    let mut sum = T::zero();
+    for dy in -h..=h {
+        for dx in -h..=h {
+            sum = sum + alpha_at(dx, dy);
+        }
+    }
+    let n = (2 * half_size_px + 1) * (2 * half_size_px + 1);
+    sum / T::c(n as f64)
+}
+
+/// Display encoding to linear: `lin = (I + offset)^g`.
+#[inline(always)]
+pub fn linearize<T: Real>(encoded: T, gamma: T, offset: T) -> T {
+    (encoded + offset).powf(gamma)
+}
+
+/// Linear to display encoding: `out = lin^(1/g) - offset`.
+#[inline(always)]
+pub fn encode<T: Real>(linear: T, gamma: T, offset: T) -> T {
+    linear.powf(T::one() / gamma) - offset
+}
+
+/// Highlight gain `1 + 0.2 m` with
+/// `m = clip(tanh(200 ((disp - f)^2 - 0.01)), 0, 1) * clip(tanh(10 (I - 200/255)), 0, 1)`,
+/// applied to display-encoded colour before linearisation.
+#[inline(always)]
+pub fn highlight_gain<T: Real>(encoded: T, rel_disp: T) -> T {
+    let clip01 = |v: T| v.max(T::zero()).min(T::one());
+    let defocused = clip01((T::c(200.0) * (rel_disp * rel_disp - T::c(0.01))).tanh());
+    let bright = clip01((T::c(10.0) * (encoded - T::c(200.0 / 255.0))).tanh());
+    T::one() + T::c(0.2) * defocused * bright
+}
+
+/// Reflection padding index (mirror without repeating the edge pixel), folded as often as
+/// needed so that any offset maps into `0..n`.
+#[inline(always)]
+pub fn reflect(i: isize, n: usize) -> usize {
+    if n == 1 {
+        return 0;
+    }
+    let period = 2 * (n as isize - 1);
+    let m = i.rem_euclid(period);
+    (if m < n as isize { m } else { period - m }) as usize
+}
+
+/// The soft scatter term of a tap for a source of radius `r` under the given aperture:
+/// `S(r - gauge)` for circle and polygon, the kernel image for a kernel aperture.
+#[inline(always)]
+pub(crate) fn scatter_term<T: Real>(
+    aperture: &ApertureEval<T>,
+    dx: isize,
+    dy: isize,
+    dist: T,
+    gauge: T,
+    radius_y_px: T,
+) -> T {
+    match aperture {
+        ApertureEval::Gauge => soft_step(radius_y_px - gauge),
+        ApertureEval::Kernel(k, _) => {
+            let r = radius_y_px.f64();
+            let shape = T::c(k.sample(dx as f64 / r, dy as f64 / r));
+            shape.max(soft_step(T::one() - dist))
+        }
+    }
+}
+
+/// Tap weight `c(y,x) = a(y) M S(y,x) / A(y) O(y,x)` (M already applied by the caller).
+#[inline(always)]
+pub fn tap_weight<T: Real>(alpha_y: T, scatter: T, radius_y_px: T, occlusion: T) -> T {
+    alpha_y * scatter / area(radius_y_px) * occlusion
+}
+
+/// One window offset inside the mask, with its geometry precomputed.
+#[derive(Clone, Copy, Debug)]
+pub struct Tap {
+    /// Horizontal offset `y - x` in pixels.
+    pub dx: isize,
+    /// Vertical offset in pixels.
+    pub dy: isize,
+    /// Euclidean distance between pixel centres.
+    pub dist: f64,
+    /// The aperture's gauge of the offset (equals `dist` for the circle).
+    pub gauge: f64,
+}
+
+/// All offsets of the `(2R+1)^2` window with `M = 1`, row-major.
+pub fn window_taps(window_radius_px: usize, aperture: &Aperture) -> Vec<Tap> {
+    let r = window_radius_px as isize;
+    let mut taps = Vec::new();
+    for dy in -r..=r {
+        for dx in -r..=r {
+            if in_window(dx, dy, window_radius_px) {
+                taps.push(Tap {
+                    dx,
+                    dy,
+                    dist: ((dx * dx + dy * dy) as f64).sqrt(),
+                    gauge: aperture.gauge(dx as f64, dy as f64),
+                });
+            }
+        }
+    }
+    taps
+}
+
+/// Running sums `C = sum Ilin(y) c(y,x)` and `W = sum c(y,x)` for one receiver and layer.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Accumulator<T> {
+    /// Weighted colour sum.
+    pub colour: [T; 3],
+    /// Weight sum.
+    pub weight: T,
+}
+
+impl<T: Real> Accumulator<T> {
+    /// Adds one tap.
+    #[inline(always)]
+    pub fn add(&mut self, rgb_linear: [T; 3], c: T) {
+        for (acc, v) in self.colour.iter_mut().zip(rgb_linear) {
+            *acc = *acc + v * c;
+        }
+        self.weight = self.weight + c;
+    }
+
+    /// Layer colour `B = C / (W + 1e-8)`.
+    #[inline(always)]
+    pub fn layer_colour(&self) -> [T; 3] {
+        let w = self.weight + T::c(WEIGHT_EPSILON);
+        self.colour.map(|c| c / w)
+    }
+}
+
+/// Front-to-back compositing `out = sum_l B_l o_l T_l`, `T_0 = 1`, `T_{l+1} = T_l (1 - o_l)`.
+#[inline]
+pub fn composite<T: Real>(layers: impl IntoIterator<Item = ([T; 3], T)>) -> [T; 3] {
+    let mut out = [T::zero(); 3];
+    let mut transmittance = T::one();
+    for (colour, coverage) in layers {
+        for (o, c) in out.iter_mut().zip(colour) {
+            *o = *o + c * coverage * transmittance;
+        }
+        transmittance = transmittance * (T::one() - coverage);
+    }
+    out
+}
+
+/// Per-pixel terms of one layer, computed once before the gather: linear colour (after
+/// the optional highlight boost), alpha, relative disparity `d`, radius `r`, focus weight `e`.
+#[derive(Clone, Debug)]
+pub struct PreparedLayer<T> {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Linear colour, 3 values per pixel.
+    pub rgb_linear: Vec<T>,
+    /// Alpha.
+    pub alpha: Vec<T>,
+    /// Relative disparity `d`.
+    pub rel_disp: Vec<T>,
+    /// Scatter radius `r` in pixels.
+    pub radius_px: Vec<T>,
+    /// Focus weight `e`.
+    pub focus_weight: Vec<T>,
+}
+
+/// Computes the per-pixel terms of a layer for a camera.
+pub fn prepare_layer<T: Real>(layer: &Layer<T>, camera: &Camera) -> PreparedLayer<T> {
+    let (k, f) = (T::c(camera.blur_k), T::c(camera.focus_disparity));
+    let (g, off) = (T::c(camera.gamma), T::c(camera.offset));
+    let rel_disp: Vec<T> = layer
+        .disparity
+        .data
+        .iter()
+        .map(|&v| relative_disparity(v, f))
+        .collect();
+    let mut rgb_linear = Vec::with_capacity(layer.rgb_encoded.data.len());
+    for (px, &d) in layer.rgb_encoded.data.chunks_exact(3).zip(&rel_disp) {
+        for &encoded in px {
+            let boosted = if camera.highlight {
+                encoded * highlight_gain(encoded, d)
+            } else {
+                encoded
+            };
+            rgb_linear.push(linearize(boosted, g, off));
+        }
+    }
+    PreparedLayer {
+        width: layer.alpha.width,
+        height: layer.alpha.height,
+        rgb_linear,
+        alpha: layer.alpha.data.clone(),
+        radius_px: rel_disp.iter().map(|&d| scatter_radius_px(k, d)).collect(),
+        focus_weight: rel_disp.iter().map(|&d| focus_weight(k, d)).collect(),
+        rel_disp,
+    }
+}
