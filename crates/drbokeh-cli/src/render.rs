@@ -17,8 +17,9 @@ use std::time::Instant;
 ///   drbokeh render --image photo.jpg --depth depth.exr --alpha matte.png --aperture hexagon --output out.exr
 ///   drbokeh render --layers stack.npz --preset paper --focus 0.4 --blur 30 --window 71 --output out.npy
 ///
-/// Output format follows the extension: .png (8-bit, or --bit-depth 16), .tif, .exr (linear
-/// float) or .npy (float32 (H,W,3) display-encoded values, float64 with --f64; unclipped).
+/// Output format follows the extension: .png (8-bit, or --bit-depth 16), .tif, .jpg, .exr
+/// (linear float) or .npy (float32 (H,W,3) display-encoded values, float64 with --f64;
+/// unclipped).
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct RenderArgs {
@@ -29,7 +30,7 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub exec: ExecArgs,
 
-    /// Output file (.png, .tif, .exr or .npy). Written only once complete.
+    /// Output file (.png, .tif, .jpg, .exr or .npy). Written only once complete.
     #[arg(long, short, value_name = "FILE")]
     pub output: PathBuf,
 

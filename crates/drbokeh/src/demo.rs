@@ -23,6 +23,9 @@ fn hash01(i: u64) -> f64 {
     (x >> 11) as f64 / (1u64 << 53) as f64
 }
 
+/// A leaf: centre, semi-axes (pixels) and orientation (radians).
+type Leaf = ((f64, f64), (f64, f64), f64);
+
 /// Soft coverage of a shape from its signed distance in pixels (negative inside).
 fn soft_edge(signed_distance_px: f64, width_px: f64) -> f64 {
     (0.5 - signed_distance_px / width_px).clamp(0.0, 1.0)
@@ -43,7 +46,7 @@ pub fn scene<T: Real>(width: usize, height: usize) -> LayerStack<T> {
 
     // Front layer: leaves (ellipses) on stems entering from the lower-left corner.
     let mut front = Layer::<T>::constant(width, height, [0.0; 3], 0.0, 0.9);
-    let leaves: Vec<((f64, f64), (f64, f64), f64)> = (0..9)
+    let leaves: Vec<Leaf> = (0..9)
         .map(|i| {
             let t = i as f64 / 8.0;
             let c = (

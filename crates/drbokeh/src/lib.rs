@@ -19,13 +19,16 @@ pub mod camera;
 pub mod demo;
 pub mod engine;
 mod error;
+pub mod eval;
 pub mod image;
 pub mod io;
 pub mod layering;
+pub mod loss;
 pub mod model;
 pub mod presets;
 mod real;
 pub mod stack;
+pub mod trace;
 
 pub use aperture::Aperture;
 pub use camera::{Camera, Window};

@@ -28,9 +28,15 @@ pub fn write_atomic(
     if !dir.is_dir() {
         return Err(Error::file(path, "output directory does not exist"));
     }
-    let tmp = tempfile::Builder::new()
-        .prefix(".drbokeh-")
-        .suffix(".part")
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".drbokeh-").suffix(".part");
+    #[cfg(unix)]
+    {
+        // Ordinary file permissions (rw-r--r--), not the private 0600 of temporary files.
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let tmp = builder
         .tempfile_in(dir)
         .map_err(|e| Error::file(path, format!("cannot create temporary file: {e}")))?;
     {

@@ -211,6 +211,8 @@ pub enum OutputFormat {
     Tiff,
     /// OpenEXR, linear float RGB (display values decoded with the camera's transfer).
     Exr,
+    /// JPEG (quality 92), display-encoded, 8 bits.
+    Jpeg,
     /// NPY, (H, W, 3) display-encoded values, not clipped or quantised (float32, or float64
     /// for f64 renders).
     Npy,
@@ -224,9 +226,10 @@ impl OutputFormat {
             "tif" | "tiff" => Ok(OutputFormat::Tiff),
             "exr" => Ok(OutputFormat::Exr),
             "npy" => Ok(OutputFormat::Npy),
+            "jpg" | "jpeg" => Ok(OutputFormat::Jpeg),
             e => Err(Error::file(
                 path,
-                format!("unsupported output extension '.{e}' (use .png, .tif, .exr or .npy)"),
+                format!("unsupported output extension '.{e}' (use .png, .tif, .exr, .npy or .jpg)"),
             )),
         }
     }
@@ -275,6 +278,19 @@ pub fn write_output<T: Real>(
             write_atomic(path, |out| {
                 DynamicImage::ImageRgb32F(buf)
                     .write_to(out, ImageFormat::OpenExr)
+                    .map_err(fail)
+            })
+        }
+        OutputFormat::Jpeg => {
+            let data = image
+                .data
+                .iter()
+                .map(|&v| (v.f64().clamp(0.0, 1.0) * 255.0).round() as u8)
+                .collect();
+            let buf = image::RgbImage::from_raw(w, h, data).unwrap();
+            write_atomic(path, |out| {
+                image::codecs::jpeg::JpegEncoder::new_with_quality(out, 92)
+                    .encode_image(&buf)
                     .map_err(fail)
             })
         }

@@ -1,0 +1,189 @@
+//! The standard benchmark: seeded procedural five-billboard scenes.
+//!
+//! Every scene is a [`SceneSpec`] that depends only on (seed, index, size, spp), so shards
+//! can generate disjoint subsets independently and a scene's `scene.json` regenerates it
+//! exactly with `drbokeh trace`.
+//!
+//! Design (see `docs/ground-truth.md`):
+//! - Lens: biconvex, Rc = 50 mm, Ra = 10 mm, eta = 1.5 (f = 50.3 mm); aperture stop radius
+//!   chosen per scene (at most [`MAX_APERTURE_RADIUS_MM`], about f/8.4, so spherical
+//!   aberration stays well under a pixel while defocus reaches 40 px).
+//! - Horizontal field of view [`FOV_DEG`]; square images.
+//! - Billboards: an opaque procedural background at 3 to 8 m and four procedural
+//!   foregrounds (foliage, strands, fence, fluff, in a random order) at distinct depths
+//!   from about 0.1 m to half the background's depth.
+//! - Focus: scene `i` focuses on the nearest foreground (`i % 3 == 0`), a middle one
+//!   (`1`) or the farthest billboard (`2`).
+//! - Largest paraxial circle of confusion: 4 to 40 px (at 512 px wide), log-spaced over
+//!   the 100 scenes in a scrambled order; smaller images scale it with their width.
+
+use super::procedural::ProceduralKind;
+use super::sampling::Rng;
+use super::scene::{BillboardSpec, CameraSpec, LensSpec, RenderSpec, SceneSpec, TextureSpec, STANDARD_AIF_SPP};
+use crate::Result;
+
+/// Horizontal field of view of the benchmark camera, degrees.
+pub const FOV_DEG: f64 = 10.0;
+/// Largest aperture stop radius used by the benchmark, mm.
+pub const MAX_APERTURE_RADIUS_MM: f64 = 3.0;
+/// Benchmark lens radius of curvature, mm.
+pub const CURVATURE_RADIUS_MM: f64 = 50.0;
+/// Benchmark lens rim radius, mm.
+pub const RIM_RADIUS_MM: f64 = 10.0;
+/// Benchmark lens refractive index.
+pub const ETA: f64 = 1.5;
+/// Smallest and largest target blur radius (px at 512 px width).
+pub const BLUR_RANGE_PX: (f64, f64) = (4.0, 40.0);
+
+/// Where a scene focuses.
+pub fn focus_target(index: usize) -> &'static str {
+    ["near", "middle", "far"][index % 3]
+}
+
+/// The spec of benchmark scene `index` (of `count`) for master `seed`, `size` x `size`
+/// pixels, `spp` samples per pixel.
+pub fn scene_spec(seed: u64, index: usize, count: usize, size: usize, spp: usize) -> Result<SceneSpec> {
+    let mut rng = Rng::from_words(&[seed, index as u64, 0xBE4C]);
+    let lens_f = super::SphericalLens::new(CURVATURE_RADIUS_MM, RIM_RADIUS_MM, ETA)?.focal_length_mm();
+    // Target blur: log-spaced over the scenes, scrambled (37 is coprime to most counts).
+    let count = count.max(1);
+    let slot = if count > 1 { (index * 37) % count } else { 0 };
+    let u = if count > 1 { slot as f64 / (count - 1) as f64 } else { 0.5 };
+    let target_px_512 = BLUR_RANGE_PX.0 * (BLUR_RANGE_PX.1 / BLUR_RANGE_PX.0).powf(u);
+    let target_px = target_px_512 * size as f64 / 512.0;
+    let px_per_radian = size as f64 / (2.0 * (0.5 * FOV_DEG.to_radians()).tan());
+
+    let mut kinds = ProceduralKind::FOREGROUNDS;
+    for k in (1..kinds.len()).rev() {
+        kinds.swap(k, rng.below(k + 1));
+    }
+    // Draw depths until the aperture the target blur needs is small enough.
+    let (depths, focus_depth, aperture) = loop {
+        let bg = rng.range(3000.0, 8000.0);
+        let near = rng.range(100.0, 180.0);
+        let far_fg = bg * rng.range(0.25, 0.5);
+        let mut fg: Vec<f64> = (0..4).map(|_| near * (far_fg / near).powf(rng.uniform())).collect();
+        fg[0] = near;
+        fg.sort_by(f64::total_cmp);
+        if fg.windows(2).any(|w| w[1] / w[0] < 1.15) {
+            continue;
+        }
+        let focus_depth = match index % 3 {
+            0 => fg[0],
+            1 => fg[1 + rng.below(2)],
+            _ => {
+                if rng.uniform() < 0.5 {
+                    bg
+                } else {
+                    fg[3]
+                }
+            }
+        };
+        let mut all = fg.clone();
+        all.push(bg);
+        let delta = all
+            .iter()
+            .map(|z| (1.0 / z - 1.0 / focus_depth).abs())
+            .fold(0.0, f64::max);
+        // r_px = A D_I delta / pitch = A delta px_per_radian (D_I cancels).
+        let aperture = target_px / (delta * px_per_radian);
+        if aperture <= MAX_APERTURE_RADIUS_MM && focus_depth > 1.5 * lens_f {
+            break (all, focus_depth, aperture);
+        }
+    };
+    let mut billboards = Vec::new();
+    for (k, &depth) in depths.iter().enumerate() {
+        let (name, center, size, kind) = if k == 4 {
+            ("background".to_string(), [0.5, 0.5], [1.6, 1.6], ProceduralKind::Background)
+        } else {
+            let s = rng.range(0.35, 0.8);
+            let aspect = rng.range(0.75, 1.33);
+            (
+                format!("{:?}", kinds[k]).to_lowercase(),
+                [rng.range(0.2, 0.8), rng.range(0.2, 0.8)],
+                [s * aspect.sqrt(), s / aspect.sqrt()],
+                kinds[k],
+            )
+        };
+        billboards.push(BillboardSpec {
+            name,
+            depth_mm: depth,
+            center,
+            size,
+            texture: TextureSpec::Procedural {
+                kind,
+                seed: rng.next_u64() >> 11,
+            },
+        });
+    }
+    Ok(SceneSpec {
+        name: format!("scene_{index:03}"),
+        camera: CameraSpec {
+            lens: LensSpec::Spherical {
+                curvature_radius_mm: CURVATURE_RADIUS_MM,
+                rim_radius_mm: RIM_RADIUS_MM,
+                eta: ETA,
+                aperture_radius_mm: Some(aperture),
+            },
+            width_px: size,
+            height_px: size,
+            fov_deg: FOV_DEG,
+            sensor_distance_mm: None,
+            focus_distance_mm: Some(focus_depth),
+        },
+        render: RenderSpec {
+            spp,
+            aif_spp: STANDARD_AIF_SPP,
+            seed: rng.next_u64() >> 11,
+        },
+        billboards,
+        derived: None,
+    })
+}
+
+/// The manifest entry of a scene (computed from its spec, without rendering).
+pub fn manifest_entry(spec: &SceneSpec, index: usize, dir_name: &str) -> Result<serde_json::Value> {
+    let optics = spec.optics()?;
+    let depths: Vec<f64> = spec.billboards.iter().map(|b| b.depth_mm).collect();
+    let near = depths.iter().cloned().fold(f64::INFINITY, f64::min);
+    let far = depths.iter().cloned().fold(0.0, f64::max);
+    let zf = optics.focus_distance_mm();
+    let k = optics.aperture_radius_mm * optics.sensor_distance_mm * (1.0 / near - 1.0 / far) / optics.pixel_pitch_mm;
+    let focus = (1.0 / zf - 1.0 / far) / (1.0 / near - 1.0 / far);
+    let max_coc = depths.iter().map(|&z| optics.coc_radius_px(z)).fold(0.0, f64::max);
+    Ok(serde_json::json!({
+        "index": index,
+        "dir": dir_name,
+        "focus_target": focus_target(index),
+        "focus_distance_mm": zf,
+        "aperture_radius_mm": optics.aperture_radius_mm,
+        "blur": k,
+        "focus": focus,
+        "max_coc_radius_px": max_coc,
+        "render_seed": spec.render.seed,
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scenes_are_deterministic_and_span_blur_and_focus() {
+        let a = scene_spec(5, 7, 100, 512, 1024).unwrap();
+        assert_eq!(a, scene_spec(5, 7, 100, 512, 1024).unwrap());
+        assert_ne!(a, scene_spec(6, 7, 100, 512, 1024).unwrap());
+        let mut blurs = Vec::new();
+        for i in 0..30 {
+            let s = scene_spec(1, i, 30, 512, 1024).unwrap();
+            s.validate().unwrap();
+            let m = manifest_entry(&s, i, "x").unwrap();
+            let r = m["max_coc_radius_px"].as_f64().unwrap();
+            assert!((3.9..=40.1).contains(&r), "scene {i}: max blur {r}");
+            let focus = m["focus"].as_f64().unwrap();
+            assert!((-1e-9..=1.0 + 1e-9).contains(&focus));
+            blurs.push(r);
+        }
+        assert!(blurs.iter().any(|&r| r < 6.0) && blurs.iter().any(|&r| r > 30.0));
+    }
+}

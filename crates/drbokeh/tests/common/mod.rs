@@ -1,0 +1,64 @@
+//! Shared test helpers: a deterministic RNG and random layer stacks.
+#![allow(dead_code)]
+
+use drbokeh::{Image, Layer, LayerStack, Real};
+
+/// SplitMix64: tiny, deterministic, good enough for test data.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.f64()
+    }
+}
+
+/// A random stack: `n` layers, front first, with partial alpha (some exact zeros and ones),
+/// smooth-ish disparity per layer (front layers nearer), random colours; last layer opaque.
+pub fn random_stack<T: Real>(seed: u64, w: usize, h: usize, n: usize) -> LayerStack<T> {
+    let mut rng = Rng(seed);
+    let layers = (0..n)
+        .map(|l| {
+            let base = 0.9 - 0.8 * l as f64 / (n.max(2) - 1) as f64;
+            let (gx, gy) = (rng.range(-0.02, 0.02), rng.range(-0.02, 0.02));
+            let mut rgb = Image::new(w, h, 3);
+            let mut alpha = Image::new(w, h, 1);
+            let mut disp = Image::new(w, h, 1);
+            for y in 0..h {
+                for x in 0..w {
+                    for c in 0..3 {
+                        *rgb.at_mut(x, y, c) = T::c(rng.f64());
+                    }
+                    let a = if l == n - 1 {
+                        1.0
+                    } else {
+                        match rng.next_u64() % 4 {
+                            0 => 0.0,
+                            1 => 1.0,
+                            _ => rng.f64(),
+                        }
+                    };
+                    *alpha.at_mut(x, y, 0) = T::c(a);
+                    let d = base + gx * x as f64 + gy * y as f64 + rng.range(-0.03, 0.03);
+                    *disp.at_mut(x, y, 0) = T::c(d.clamp(0.0, 1.0));
+                }
+            }
+            Layer {
+                rgb_encoded: rgb,
+                alpha,
+                disparity: disp,
+            }
+        })
+        .collect();
+    LayerStack::new(layers).unwrap()
+}
