@@ -65,6 +65,12 @@ impl KernelImage {
 
     /// Bilinear sample at normalised coordinates (u, v) in [-1, 1] (longer side), 0 outside.
     pub fn sample(&self, u: f64, v: f64) -> f64 {
+        self.sample_with_gradient(u, v).0
+    }
+
+    /// Bilinear sample and its partial derivatives with respect to u and v (piecewise
+    /// linear: the derivative of the cell the point lies in).
+    pub fn sample_with_gradient(&self, u: f64, v: f64) -> (f64, f64, f64) {
         let half = self.width.max(self.height) as f64 / 2.0;
         let fx = self.width as f64 / 2.0 + u * half - 0.5;
         let fy = self.height as f64 / 2.0 + v * half - 0.5;
@@ -77,8 +83,12 @@ impl KernelImage {
                 self.values[y as usize * self.width + x as usize]
             }
         };
-        (1.0 - ty) * ((1.0 - tx) * get(x0, y0) + tx * get(x0 + 1.0, y0))
-            + ty * ((1.0 - tx) * get(x0, y0 + 1.0) + tx * get(x0 + 1.0, y0 + 1.0))
+        let (a, b) = (get(x0, y0), get(x0 + 1.0, y0));
+        let (c, d) = (get(x0, y0 + 1.0), get(x0 + 1.0, y0 + 1.0));
+        let value = (1.0 - ty) * ((1.0 - tx) * a + tx * b) + ty * ((1.0 - tx) * c + tx * d);
+        let d_tx = (1.0 - ty) * (b - a) + ty * (d - c);
+        let d_ty = (1.0 - tx) * (c - a) + tx * (d - b);
+        (value, d_tx * half, d_ty * half)
     }
 }
 

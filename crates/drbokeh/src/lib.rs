@@ -32,6 +32,7 @@ pub mod trace;
 
 pub use aperture::Aperture;
 pub use camera::{Camera, Window};
+pub use engine::adjoint::{render_with_tape, Gradients, LayerGradients, Tape};
 pub use engine::{render, Engine, NoProgress, Progress};
 pub use error::{Error, Result};
 pub use image::Image;

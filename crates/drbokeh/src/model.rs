@@ -32,6 +32,12 @@ pub fn soft_step<T: Real>(r_minus_dist: T) -> T {
     T::one() / (T::one() + T::c(10.0) * (T::c(-3.0) * r_minus_dist).exp())
 }
 
+/// Derivative of [`soft_step`] with respect to `r - dist`, from its value: `3 S (1 - S)`.
+#[inline(always)]
+pub fn soft_step_derivative<T: Real>(s: T) -> T {
+    T::c(3.0) * s * (T::one() - s)
+}
+
 /// Area normalisation `A = r^2`.
 #[inline(always)]
 pub fn area<T: Real>(radius_px: T) -> T {
@@ -51,10 +57,28 @@ pub fn focus_weight<T: Real>(blur_k: T, rel_disp_x: T) -> T {
     (T::c(-3.0) * kd * kd).exp()
 }
 
+/// Partial derivatives of [`focus_weight`] from its value `e`:
+/// `(de/dd_x, de/dK) = (-6 K^2 d_x e, -6 K d_x^2 e)`.
+#[inline(always)]
+pub fn focus_weight_derivatives<T: Real>(blur_k: T, rel_disp_x: T, e: T) -> (T, T) {
+    let six = T::c(6.0);
+    (
+        -six * blur_k * blur_k * rel_disp_x * e,
+        -six * blur_k * rel_disp_x * rel_disp_x * e,
+    )
+}
+
 /// Depth step `s(D) = 1/2 + 1/2 tanh(10 (D - 0.1))`.
 #[inline(always)]
 pub fn depth_step<T: Real>(disp_difference: T) -> T {
     T::c(0.5) + T::c(0.5) * (T::c(10.0) * (disp_difference - T::c(0.1))).tanh()
+}
+
+/// Derivative of [`depth_step`]: `5 (1 - tanh^2(10 (D - 0.1)))`.
+#[inline(always)]
+pub fn depth_step_derivative<T: Real>(disp_difference: T) -> T {
+    let t = (T::c(10.0) * (disp_difference - T::c(0.1))).tanh();
+    T::c(5.0) * (T::one() - t * t)
 }
 
 /// Soft occlusion `O(y,x) = 1 + e(x) (s(d(y) - d(x)) - 1)` (supplement eq. 1 with its sign
@@ -62,6 +86,19 @@ pub fn depth_step<T: Real>(disp_difference: T) -> T {
 #[inline(always)]
 pub fn occlusion<T: Real>(focus_weight_x: T, rel_disp_y: T, rel_disp_x: T) -> T {
     T::one() + focus_weight_x * (depth_step(rel_disp_y - rel_disp_x) - T::one())
+}
+
+/// Partial derivatives of [`occlusion`] (non-centre taps):
+/// `dO/dd_y = e s'(D)`, `dO/dd_x|_e = -e s'(D)`, `dO/de = s(D) - 1`, with `D = d_y - d_x`.
+#[inline(always)]
+pub fn occlusion_derivatives<T: Real>(
+    focus_weight_x: T,
+    rel_disp_y: T,
+    rel_disp_x: T,
+) -> (T, T, T) {
+    let diff = rel_disp_y - rel_disp_x;
+    let ds = focus_weight_x * depth_step_derivative(diff);
+    (ds, -ds, depth_step(diff) - T::one())
 }
 
 /// Half-size of the paper's coverage box: `min(floor(r(x) / 2), R)`.
@@ -98,15 +135,61 @@ pub fn encode<T: Real>(linear: T, gamma: T, offset: T) -> T {
     linear.powf(T::one() / gamma) - offset
 }
 
-/// Highlight gain `1 + 0.2 m` with
-/// `m = clip(tanh(200 ((disp - f)^2 - 0.01)), 0, 1) * clip(tanh(10 (I - 200/255)), 0, 1)`,
-/// applied to display-encoded colour before linearisation.
+/// Derivative of [`encode`]: `(1/g) lin^(1/g - 1)`; 0 where `lin <= 0` (undefined there).
 #[inline(always)]
-pub fn highlight_gain<T: Real>(encoded: T, rel_disp: T) -> T {
-    let clip01 = |v: T| v.max(T::zero()).min(T::one());
-    let defocused = clip01((T::c(200.0) * (rel_disp * rel_disp - T::c(0.01))).tanh());
-    let bright = clip01((T::c(10.0) * (encoded - T::c(200.0 / 255.0))).tanh());
-    T::one() + T::c(0.2) * defocused * bright
+pub fn encode_derivative<T: Real>(linear: T, gamma: T) -> T {
+    if linear <= T::zero() {
+        return T::zero();
+    }
+    linear.powf(T::one() / gamma - T::one()) / gamma
+}
+
+/// Linear colour of a source pixel, and its partial derivatives. With `highlight`, the
+/// display-encoded value is first boosted by `1 + 0.2 m`, with
+/// `m = clip(tanh(200 ((disp - f)^2 - 0.01)), 0, 1) * clip(tanh(10 (I - 200/255)), 0, 1)`.
+/// Returns the linear colour of a source pixel with the optional highlight boost, and its partial
+/// derivatives `(lin, dlin/dI, dlin/dd)` with respect to the encoded value `I` and the
+/// relative disparity `d`. (`tanh < 1`, so only the lower clip can be active.)
+#[inline]
+pub fn source_linear_with_derivatives<T: Real>(
+    encoded: T,
+    rel_disp: T,
+    highlight: bool,
+    gamma: T,
+    offset: T,
+) -> (T, T, T) {
+    let (boosted, d_boost_di, d_boost_dd) = if highlight {
+        let arg_p = T::c(200.0) * (rel_disp * rel_disp - T::c(0.01));
+        let arg_q = T::c(10.0) * (encoded - T::c(200.0 / 255.0));
+        let (tp, tq) = (arg_p.tanh(), arg_q.tanh());
+        let (p, q) = (tp.max(T::zero()), tq.max(T::zero()));
+        let dp = if arg_p > T::zero() {
+            T::c(400.0) * rel_disp * (T::one() - tp * tp)
+        } else {
+            T::zero()
+        };
+        let dq = if arg_q > T::zero() {
+            T::c(10.0) * (T::one() - tq * tq)
+        } else {
+            T::zero()
+        };
+        let gain = T::one() + T::c(0.2) * p * q;
+        (
+            encoded * gain,
+            gain + encoded * T::c(0.2) * p * dq,
+            encoded * T::c(0.2) * dp * q,
+        )
+    } else {
+        (encoded, T::one(), T::zero())
+    };
+    let base = boosted + offset;
+    let lin = base.powf(gamma);
+    let dlin = if base > T::zero() {
+        gamma * base.powf(gamma - T::one())
+    } else {
+        T::zero()
+    };
+    (lin, dlin * d_boost_di, dlin * d_boost_dd)
 }
 
 /// Reflection padding index (mirror without repeating the edge pixel), folded as often as
@@ -138,6 +221,39 @@ pub(crate) fn scatter_term<T: Real>(
             let r = radius_y_px.f64();
             let shape = T::c(k.sample(dx as f64 / r, dy as f64 / r));
             shape.max(soft_step(T::one() - dist))
+        }
+    }
+}
+
+/// [`scatter_term`] and its derivative with respect to the source radius `r`.
+#[inline(always)]
+pub(crate) fn scatter_term_with_derivative<T: Real>(
+    aperture: &ApertureEval<T>,
+    dx: isize,
+    dy: isize,
+    dist: T,
+    gauge: T,
+    radius_y_px: T,
+) -> (T, T) {
+    match aperture {
+        ApertureEval::Gauge => {
+            let s = soft_step(radius_y_px - gauge);
+            (s, soft_step_derivative(s))
+        }
+        ApertureEval::Kernel(k, _) => {
+            let r = radius_y_px.f64();
+            let (u, v) = (dx as f64 / r, dy as f64 / r);
+            let (shape, du, dv) = k.sample_with_gradient(u, v);
+            let footprint = soft_step(T::one() - dist);
+            if T::c(shape) >= footprint {
+                // d/dr k(dx/r, dy/r) = -(du * dx + dv * dy) / r^2
+                (
+                    T::c(shape),
+                    T::c(-(du * dx as f64 + dv * dy as f64) / (r * r)),
+                )
+            } else {
+                (footprint, T::zero())
+            }
         }
     }
 }
@@ -254,12 +370,7 @@ pub fn prepare_layer<T: Real>(layer: &Layer<T>, camera: &Camera) -> PreparedLaye
     let mut rgb_linear = Vec::with_capacity(layer.rgb_encoded.data.len());
     for (px, &d) in layer.rgb_encoded.data.chunks_exact(3).zip(&rel_disp) {
         for &encoded in px {
-            let boosted = if camera.highlight {
-                encoded * highlight_gain(encoded, d)
-            } else {
-                encoded
-            };
-            rgb_linear.push(linearize(boosted, g, off));
+            rgb_linear.push(source_linear_with_derivatives(encoded, d, camera.highlight, g, off).0);
         }
     }
     PreparedLayer {

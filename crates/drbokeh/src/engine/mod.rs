@@ -1,6 +1,7 @@
 //! Execution strategies for the model. Each engine evaluates exactly the functions in
 //! [`crate::model`]; they differ only in schedule. The reference engine is the oracle.
 
+pub mod adjoint;
 mod reference;
 mod threaded;
 

@@ -13,17 +13,19 @@ use crate::Real;
 use rayon::prelude::*;
 
 /// One layer's per-pixel terms, reflection-padded by `R` on every side.
-struct PaddedLayer<T> {
-    stride: usize,
-    rgb_linear: Vec<[T; 3]>,
-    alpha: Vec<T>,
-    rel_disp: Vec<T>,
-    radius_px: Vec<T>,
-    focus_weight: Vec<T>,
+pub(super) struct PaddedLayer<T> {
+    pub stride: usize,
+    pub rgb_linear: Vec<[T; 3]>,
+    pub alpha: Vec<T>,
+    pub rel_disp: Vec<T>,
+    pub radius_px: Vec<T>,
+    pub focus_weight: Vec<T>,
+    /// For each padded pixel, the index of the source pixel it mirrors.
+    pub source: Vec<usize>,
 }
 
 impl<T: Real> PaddedLayer<T> {
-    fn new(layer: &PreparedLayer<T>, pad: usize) -> Self {
+    pub fn new(layer: &PreparedLayer<T>, pad: usize) -> Self {
         let (w, h) = (layer.width, layer.height);
         let (pw, ph) = (w + 2 * pad, h + 2 * pad);
         let source: Vec<usize> = (0..ph)
@@ -46,8 +48,75 @@ impl<T: Real> PaddedLayer<T> {
             rel_disp: gather(&layer.rel_disp),
             radius_px: gather(&layer.radius_px),
             focus_weight: gather(&layer.focus_weight),
+            source,
         }
     }
+}
+
+/// What every pass over the window needs: the taps, their padded-index offsets and geometry.
+pub(super) struct Kernel<T> {
+    pub big_r: usize,
+    pub aperture: ApertureEval<T>,
+    pub taps: Vec<Tap>,
+    pub offsets: Vec<isize>,
+    pub geometry: Vec<(T, T)>,
+}
+
+impl<T: Real> Kernel<T> {
+    pub fn new(settings: &RenderSettings, stride: usize) -> Self {
+        let big_r = settings.camera.window.radius_px();
+        let taps = model::window_taps(big_r, &settings.aperture);
+        Kernel {
+            big_r,
+            aperture: ApertureEval::new(&settings.aperture),
+            offsets: taps.iter().map(|t| t.dy * stride as isize + t.dx).collect(),
+            geometry: taps.iter().map(|t| (T::c(t.dist), T::c(t.gauge))).collect(),
+            taps,
+        }
+    }
+
+    /// Gathers one layer at padded receiver index `xi`: the accumulated sums and coverage.
+    #[inline]
+    pub fn gather(&self, layer: &PaddedLayer<T>, xi: usize) -> (Accumulator<T>, T) {
+        let (d_x, e_x) = (layer.rel_disp[xi], layer.focus_weight[xi]);
+        let mut acc = Accumulator::default();
+        for ((tap, &offset), &(dist, gauge)) in
+            self.taps.iter().zip(&self.offsets).zip(&self.geometry)
+        {
+            let yi = (xi as isize + offset) as usize;
+            let a_y = layer.alpha[yi];
+            if a_y == T::zero() {
+                continue;
+            }
+            let r_y = layer.radius_px[yi];
+            let s = model::scatter_term(&self.aperture, tap.dx, tap.dy, dist, gauge, r_y);
+            let o = if offset == 0 {
+                T::one()
+            } else {
+                model::occlusion(e_x, layer.rel_disp[yi], d_x)
+            };
+            acc.add(layer.rgb_linear[yi], model::tap_weight(a_y, s, r_y, o));
+        }
+        let half = model::coverage_half_size_px(layer.radius_px[xi], self.big_r);
+        let stride = layer.stride as isize;
+        let coverage = model::box_coverage(half, |dx, dy| {
+            layer.alpha[(xi as isize + dy * stride + dx) as usize]
+        });
+        (acc, coverage)
+    }
+}
+
+/// Prepares and pads every layer of a stack.
+pub(super) fn pad_layers<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+) -> Vec<PaddedLayer<T>> {
+    let big_r = settings.camera.window.radius_px();
+    stack
+        .layers
+        .par_iter()
+        .map(|l| PaddedLayer::new(&model::prepare_layer(l, &settings.camera), big_r))
+        .collect()
 }
 
 pub(super) fn render<T: Real>(
@@ -55,20 +124,12 @@ pub(super) fn render<T: Real>(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Image<T> {
-    let camera = &settings.camera;
-    let big_r = camera.window.radius_px();
-    let aperture = ApertureEval::<T>::new(&settings.aperture);
-    let taps: Vec<Tap> = model::window_taps(big_r, &settings.aperture);
-    let layers: Vec<PaddedLayer<T>> = stack
-        .layers
-        .par_iter()
-        .map(|l| PaddedLayer::new(&model::prepare_layer(l, camera), big_r))
-        .collect();
+    let layers = pad_layers(stack, settings);
     let stride = layers[0].stride;
-    let offsets: Vec<isize> = taps.iter().map(|t| t.dy * stride as isize + t.dx).collect();
-    let tap_geometry: Vec<(T, T)> = taps.iter().map(|t| (T::c(t.dist), T::c(t.gauge))).collect();
+    let kernel = Kernel::new(settings, stride);
+    let big_r = kernel.big_r;
     let (w, h) = (stack.width, stack.height);
-    let (g, off) = (T::c(camera.gamma), T::c(camera.offset));
+    let (g, off) = (T::c(settings.camera.gamma), T::c(settings.camera.offset));
     let mut out = Image::new(w, h, 3);
     out.data
         .par_chunks_mut(3 * w)
@@ -76,33 +137,10 @@ pub(super) fn render<T: Real>(
         .for_each(|(py, row)| {
             for px in 0..w {
                 let xi = (py + big_r) * stride + px + big_r;
-                let per_layer = layers.iter().map(|layer| {
-                    let (d_x, e_x) = (layer.rel_disp[xi], layer.focus_weight[xi]);
-                    let mut acc = Accumulator::default();
-                    for ((tap, &offset), &(dist, gauge)) in
-                        taps.iter().zip(&offsets).zip(&tap_geometry)
-                    {
-                        let yi = (xi as isize + offset) as usize;
-                        let a_y = layer.alpha[yi];
-                        if a_y == T::zero() {
-                            continue;
-                        }
-                        let r_y = layer.radius_px[yi];
-                        let s = model::scatter_term(&aperture, tap.dx, tap.dy, dist, gauge, r_y);
-                        let o = if offset == 0 {
-                            T::one()
-                        } else {
-                            model::occlusion(e_x, layer.rel_disp[yi], d_x)
-                        };
-                        acc.add(layer.rgb_linear[yi], model::tap_weight(a_y, s, r_y, o));
-                    }
-                    let half = model::coverage_half_size_px(layer.radius_px[xi], big_r);
-                    let coverage = model::box_coverage(half, |dx, dy| {
-                        layer.alpha[(xi as isize + dy * stride as isize + dx) as usize]
-                    });
+                let linear = model::composite(layers.iter().map(|layer| {
+                    let (acc, coverage) = kernel.gather(layer, xi);
                     (acc.layer_colour(), coverage)
-                });
-                let linear = model::composite(per_layer);
+                }));
                 for (c, v) in linear.into_iter().enumerate() {
                     row[3 * px + c] = model::encode(v, g, off);
                 }

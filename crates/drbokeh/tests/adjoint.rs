@@ -1,0 +1,353 @@
+//! The adjoint against central finite differences of the forward pass, in f64.
+
+mod common;
+
+use common::Rng;
+use drbokeh::aperture::KernelImage;
+use drbokeh::{
+    render, render_with_tape, Aperture, Engine, Image, Layer, LayerStack, NoProgress,
+    RenderSettings, Window,
+};
+
+/// A stack whose alpha stays in [0.1, 1] (finite differences of alpha are meaningless where
+/// a layer is empty: the 1e-8 regulariser dominates, see the spec) and whose disparities
+/// sit in distinct depth bands, some in focus and some blurred.
+fn fd_stack(seed: u64, w: usize, h: usize, n: usize) -> LayerStack<f64> {
+    let mut rng = Rng(seed);
+    let layers = (0..n)
+        .map(|l| {
+            let mut layer = Layer::<f64>::constant(w, h, [0.0; 3], 1.0, 0.0);
+            let base = 0.85 - 0.7 * l as f64 / (n - 1) as f64;
+            for i in 0..w * h {
+                for c in 0..3 {
+                    layer.rgb_encoded.data[3 * i + c] = rng.range(0.05, 0.95);
+                }
+                layer.alpha.data[i] = if l == n - 1 { 1.0 } else { rng.range(0.1, 1.0) };
+                layer.disparity.data[i] = base + rng.range(-0.06, 0.06);
+            }
+            layer
+        })
+        .collect();
+    LayerStack::new(layers).unwrap()
+}
+
+fn settings(focus: f64, k: f64, window: usize, aperture: Aperture) -> RenderSettings {
+    let mut s = RenderSettings::paper(focus);
+    s.camera.blur_k = k;
+    s.camera.window = Window::from_size(window).unwrap();
+    s.aperture = aperture;
+    s
+}
+
+fn loss(stack: &LayerStack<f64>, s: &RenderSettings, weights: &Image<f64>) -> f64 {
+    let out = render(stack, s, Engine::Threaded, &NoProgress).unwrap();
+    out.data.iter().zip(&weights.data).map(|(a, b)| a * b).sum()
+}
+
+fn random_weights(seed: u64, w: usize, h: usize) -> Image<f64> {
+    let mut rng = Rng(seed);
+    let data = (0..w * h * 3).map(|_| rng.range(-1.0, 1.0)).collect();
+    Image::from_vec(w, h, 3, data).unwrap()
+}
+
+const STEP: f64 = 1e-6;
+
+fn check(name: &str, analytic: f64, fd: f64, failures: &mut Vec<String>) {
+    // Relative error 1e-4, with an absolute floor at the finite difference's own noise.
+    let err = (analytic - fd).abs();
+    if err > 1e-4 * fd.abs().max(1e-5) {
+        failures.push(format!("{name}: analytic {analytic:e} vs fd {fd:e}"));
+    }
+}
+
+/// Whether a perturbation of STEP (in disparity, K or focus: r moves by at most
+/// max(K, 1) * STEP) could cross a coverage-box jump (r(x)/2 at an integer) or the kink of
+/// |d| at d = 0. A margin of 1e-4 is ten times the largest move.
+fn near_kink(disp: f64, s: &RenderSettings) -> bool {
+    let d = disp - s.camera.focus_disparity;
+    let r = s.camera.blur_k * d.abs() + 1.0;
+    d.abs() < 1e-4 || ((r / 2.0) - (r / 2.0).round()).abs() < 1e-4
+}
+
+fn run_fd(stack: &LayerStack<f64>, s: &RenderSettings, seed: u64) {
+    let (w, h) = (stack.width, stack.height);
+    let weights = random_weights(seed, w, h);
+    let (_, tape) = render_with_tape(stack, s, &NoProgress).unwrap();
+    let grads = tape.backward(&weights, &NoProgress).unwrap();
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    for l in 0..stack.layers.len() {
+        for i in 0..w * h {
+            for c in 0..3 {
+                let mut p = stack.clone();
+                p.layers[l].rgb_encoded.data[3 * i + c] += STEP;
+                let up = loss(&p, s, &weights);
+                p.layers[l].rgb_encoded.data[3 * i + c] -= 2.0 * STEP;
+                let fd = (up - loss(&p, s, &weights)) / (2.0 * STEP);
+                check(
+                    &format!("layer {l} rgb[{i}][{c}]"),
+                    grads.layers[l].rgb.data[3 * i + c],
+                    fd,
+                    &mut failures,
+                );
+                checked += 1;
+            }
+            if stack.layers[l].alpha.data[i] < 1.0 {
+                let mut p = stack.clone();
+                p.layers[l].alpha.data[i] += STEP;
+                let up = loss(&p, s, &weights);
+                p.layers[l].alpha.data[i] -= 2.0 * STEP;
+                let fd = (up - loss(&p, s, &weights)) / (2.0 * STEP);
+                check(
+                    &format!("layer {l} alpha[{i}]"),
+                    grads.layers[l].alpha.data[i],
+                    fd,
+                    &mut failures,
+                );
+                checked += 1;
+            }
+            if !near_kink(stack.layers[l].disparity.data[i], s) {
+                let mut p = stack.clone();
+                p.layers[l].disparity.data[i] += STEP;
+                let up = loss(&p, s, &weights);
+                p.layers[l].disparity.data[i] -= 2.0 * STEP;
+                let fd = (up - loss(&p, s, &weights)) / (2.0 * STEP);
+                check(
+                    &format!("layer {l} disparity[{i}]"),
+                    grads.layers[l].disparity.data[i],
+                    fd,
+                    &mut failures,
+                );
+                checked += 1;
+            }
+        }
+    }
+    // Scalars: only meaningful when no pixel sits on a coverage jump within the step.
+    let all_clear = |s: &RenderSettings| {
+        stack
+            .layers
+            .iter()
+            .flat_map(|l| l.disparity.data.iter())
+            .all(|&d| !near_kink(d, s))
+    };
+    if all_clear(s) {
+        let mut p = s.clone();
+        p.camera.blur_k += STEP;
+        let up = loss(stack, &p, &weights);
+        p.camera.blur_k -= 2.0 * STEP;
+        let fd = (up - loss(stack, &p, &weights)) / (2.0 * STEP);
+        check("blur K", grads.blur_k, fd, &mut failures);
+        let mut p = s.clone();
+        p.camera.focus_disparity += STEP;
+        let up = loss(stack, &p, &weights);
+        p.camera.focus_disparity -= 2.0 * STEP;
+        let fd = (up - loss(stack, &p, &weights)) / (2.0 * STEP);
+        check("focus", grads.focus, fd, &mut failures);
+        checked += 2;
+    } else {
+        panic!("test scene has a pixel on a coverage jump; pick another seed");
+    }
+    assert!(checked > 100);
+    assert!(
+        failures.is_empty(),
+        "{} of {checked} gradients wrong:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+#[test]
+fn fd_circle_three_layers() {
+    let stack = fd_stack(21, 9, 8, 3);
+    run_fd(&stack, &settings(0.5, 9.0, 9, Aperture::Circle), 1);
+}
+
+#[test]
+fn fd_polygon_with_highlight() {
+    let mut stack = fd_stack(22, 8, 9, 2);
+    // Some bright pixels so the highlight boost is active and differentiated.
+    for i in (0..72).step_by(5) {
+        stack.layers[1].rgb_encoded.data[3 * i] = 0.93;
+    }
+    let mut s = settings(
+        0.42,
+        11.0,
+        9,
+        Aperture::Polygon {
+            blades: 6,
+            rotation_deg: 20.0,
+        },
+    );
+    s.camera.highlight = true;
+    run_fd(&stack, &s, 2);
+}
+
+#[test]
+fn fd_kernel_aperture() {
+    let n = 9;
+    let mut grey = Image::<f64>::new(n, n, 1);
+    for y in 0..n {
+        for x in 0..n {
+            let r = ((x as f64 - 4.0).powi(2) + (y as f64 - 4.0).powi(2)).sqrt();
+            grey.data[y * n + x] = (1.0 - r / 5.0).max(0.0) * (1.0 + 0.5 * ((x + y) % 3) as f64);
+        }
+    }
+    let stack = fd_stack(23, 8, 8, 2);
+    run_fd(
+        &stack,
+        &settings(
+            0.6,
+            10.0,
+            9,
+            Aperture::Kernel(KernelImage::new(&grey).unwrap()),
+        ),
+        3,
+    );
+}
+
+#[test]
+fn fd_with_gamma_and_offset() {
+    let stack = fd_stack(24, 7, 7, 3);
+    let mut s = settings(0.3, 7.0, 7, Aperture::Circle);
+    s.camera.gamma = 1.8;
+    s.camera.offset = 0.05;
+    run_fd(&stack, &s, 4);
+}
+
+/// With exact zeros in alpha (empty regions), colour and disparity gradients stay exact.
+#[test]
+fn fd_with_empty_regions_for_colour_and_disparity() {
+    let mut stack = fd_stack(25, 8, 8, 2);
+    for i in 0..32 {
+        stack.layers[0].alpha.data[i] = 0.0;
+    }
+    let s = settings(0.55, 8.0, 7, Aperture::Circle);
+    let weights = random_weights(5, 8, 8);
+    let (_, tape) = render_with_tape(&stack, &s, &NoProgress).unwrap();
+    let grads = tape.backward(&weights, &NoProgress).unwrap();
+    let mut failures = Vec::new();
+    for l in 0..2 {
+        for i in 0..64 {
+            if near_kink(stack.layers[l].disparity.data[i], &s) {
+                continue;
+            }
+            let mut p = stack.clone();
+            p.layers[l].disparity.data[i] += STEP;
+            let up = loss(&p, &s, &weights);
+            p.layers[l].disparity.data[i] -= 2.0 * STEP;
+            let fd = (up - loss(&p, &s, &weights)) / (2.0 * STEP);
+            check(
+                &format!("layer {l} disparity[{i}]"),
+                grads.layers[l].disparity.data[i],
+                fd,
+                &mut failures,
+            );
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The coverage box's half-size floor(r/2) jumps; its derivative is zero (as in the paper):
+/// at a pixel sitting exactly on a jump the analytic gradient equals the one-sided
+/// difference on the side that keeps the box, while the central difference sees the jump.
+#[test]
+fn coverage_floor_has_zero_derivative() {
+    let (w, h) = (9, 9);
+    // Disparity a hair above 0.7 so r sits just above the jump at r = 4 (0.7 - 0.4 rounds
+    // below 0.3 in binary).
+    let mut front = Layer::<f64>::constant(w, h, [0.8, 0.3, 0.2], 0.0, 0.7 + 1e-10);
+    let back = Layer::<f64>::constant(w, h, [0.1, 0.2, 0.7], 1.0, 0.2);
+    for y in 0..h {
+        for x in 3..w {
+            front.alpha.data[y * w + x] = 0.2 + 0.08 * x as f64;
+        }
+    }
+    // K = 10, f = 0.4: r = 10 * 0.3 + 1 = 4 (+1e-9), so floor(r/2) = 2, on the jump.
+    let stack = LayerStack::new(vec![front, back]).unwrap();
+    let s = settings(0.4, 10.0, 9, Aperture::Circle);
+    let weights = random_weights(6, w, h);
+    let (_, tape) = render_with_tape(&stack, &s, &NoProgress).unwrap();
+    let grads = tape.backward(&weights, &NoProgress).unwrap();
+    let i = 4 * w + 4;
+    let base = loss(&stack, &s, &weights);
+    let mut up = stack.clone();
+    up.layers[0].disparity.data[i] += STEP;
+    let mut down = stack.clone();
+    down.layers[0].disparity.data[i] -= STEP;
+    let (l_up, l_down) = (loss(&up, &s, &weights), loss(&down, &s, &weights));
+    let one_sided = (l_up - base) / STEP; // r grows: the box keeps half-size 2
+    let central = (l_up - l_down) / (2.0 * STEP);
+    let g = grads.layers[0].disparity.data[i];
+    assert!(
+        (g - one_sided).abs() < 1e-3 * one_sided.abs().max(1e-3),
+        "analytic {g} vs one-sided {one_sided}"
+    );
+    assert!(
+        (central - one_sided).abs() > 100.0 * (g - one_sided).abs().max(1e-6),
+        "the box jump should show in the central difference ({central} vs {one_sided})"
+    );
+}
+
+#[test]
+fn adjoint_is_deterministic_for_any_thread_count() {
+    let stack = common::random_stack::<f32>(9, 29, 23, 3);
+    let s = settings(
+        0.4,
+        15.0,
+        13,
+        Aperture::Polygon {
+            blades: 5,
+            rotation_deg: 0.0,
+        },
+    );
+    let weights = random_weights(7, 29, 23).cast::<f32>();
+    let run = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+            .install(|| {
+                let (out, tape) = render_with_tape(&stack, &s, &NoProgress).unwrap();
+                let g = tape.backward(&weights, &NoProgress).unwrap();
+                let mut bytes: Vec<u32> = out.data.iter().map(|v| v.to_bits()).collect();
+                for l in &g.layers {
+                    bytes.extend(
+                        l.rgb
+                            .data
+                            .iter()
+                            .chain(&l.alpha.data)
+                            .chain(&l.disparity.data)
+                            .map(|v| v.to_bits()),
+                    );
+                }
+                (bytes, g.blur_k.to_bits(), g.focus.to_bits())
+            })
+    };
+    let one = run(1);
+    for n in [2, 4, 7] {
+        assert!(one == run(n), "{n} threads differ from 1");
+    }
+    // The tape's forward is the threaded render, bit for bit.
+    let (out, _) = render_with_tape(&stack, &s, &NoProgress).unwrap();
+    assert_eq!(
+        out.data,
+        render(&stack, &s, Engine::Threaded, &NoProgress)
+            .unwrap()
+            .data
+    );
+}
+
+#[test]
+fn backward_rejects_a_mismatched_gradient() {
+    let stack = fd_stack(1, 6, 5, 2);
+    let (_, tape) = render_with_tape(
+        &stack,
+        &settings(0.5, 5.0, 5, Aperture::Circle),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(tape.backward(&Image::new(5, 6, 3), &NoProgress).is_err());
+    let mut bad = Image::<f64>::new(6, 5, 3);
+    bad.data[0] = f64::NAN;
+    assert!(tape.backward(&bad, &NoProgress).is_err());
+}
