@@ -15,7 +15,7 @@
 //! `sigma=k/6, win_size=k`, but with `skimage.metrics._structural_similarity.gaussian`
 //! replaced by `scipy.ndimage.gaussian_filter(im, sigma, mode='reflect', radius=(k-1)//2)`,
 //! because skimage hard-codes `truncate=3.5` (radius 6, not 5, for sigma = 11/6).
-//! `SSIM_SKIMAGE_SIGMA_11_6` is the unpatched call with `sigma=11/6` (skimage's own 15-tap
+//! `SSIM_SKIMAGE_SIGMA_11_6` is the unpatched call with `sigma=11/6` (skimage's own 13-tap
 //! window). `MS_SSIM` comes from a numpy/scipy implementation of the definition documented
 //! in `drbokeh::eval::metrics::ms_ssim` (skimage has no MS-SSIM). The Python script is not
 //! run by the tests.
@@ -54,7 +54,9 @@ fn image(w: usize, h: usize, c: usize, f: impl Fn(usize, usize, usize) -> f64) -
 
 /// `((7x + 13y + 5c) mod 17) / 16`.
 fn pattern(w: usize, h: usize, c: usize) -> Image<f64> {
-    image(w, h, c, |x, y, ch| ((x * 7 + y * 13 + ch * 5) % 17) as f64 / 16.0)
+    image(w, h, c, |x, y, ch| {
+        ((x * 7 + y * 13 + ch * 5) % 17) as f64 / 16.0
+    })
 }
 
 /// `0.8 a + 0.2 (0.5 + 0.4 sin(0.37x + 0.23y + 1.1c))`.
@@ -94,7 +96,11 @@ fn ssim_matches_scikit_image() {
     let (a, b) = (pattern(40, 34, 3), perturbed(40, 34, 3));
     assert_close("SSIM rgb", metrics::ssim(&a, &b).unwrap(), SSIM_RGB_40X34);
     let (ga, gb) = (grey_pattern(23, 19), grey_perturbed(23, 19));
-    assert_close("SSIM grey", metrics::ssim(&ga, &gb).unwrap(), SSIM_GREY_23X19);
+    assert_close(
+        "SSIM grey",
+        metrics::ssim(&ga, &gb).unwrap(),
+        SSIM_GREY_23X19,
+    );
     // f32 inputs are computed in f64 after conversion: only the input rounding differs.
     let s32 = metrics::ssim(&a.cast::<f32>(), &b.cast::<f32>()).unwrap();
     assert!((s32 - SSIM_RGB_40X34).abs() < 1e-6, "{s32}");
@@ -105,7 +111,11 @@ fn psnr_matches_scikit_image() {
     let (a, b) = (pattern(40, 34, 3), perturbed(40, 34, 3));
     assert_close("PSNR rgb", metrics::psnr(&a, &b).unwrap(), PSNR_RGB_40X34);
     let (ga, gb) = (grey_pattern(23, 19), grey_perturbed(23, 19));
-    assert_close("PSNR grey", metrics::psnr(&ga, &gb).unwrap(), PSNR_GREY_23X19);
+    assert_close(
+        "PSNR grey",
+        metrics::psnr(&ga, &gb).unwrap(),
+        PSNR_GREY_23X19,
+    );
     assert_eq!(metrics::psnr(&a, &a).unwrap(), f64::INFINITY);
 }
 
@@ -120,10 +130,10 @@ fn loss_ssim_at_11_with_sigma_1_5_is_the_metric() {
 
 #[test]
 fn skimage_window_for_sigma_11_over_6() {
-    // skimage's own window for sigma = 11/6 is 15 taps (radius int(3.5 * 11/6 + 0.5) = 6).
+    // skimage's own window for sigma = 11/6 is 13 taps (radius int(3.5 * 11/6 + 0.5) = 6).
     let (a, b) = (pattern(40, 34, 3), perturbed(40, 34, 3));
     let window = SsimWindow::skimage(11.0 / 6.0).unwrap();
-    assert_eq!(window.size(), 15);
+    assert_eq!(window.size(), 13);
     assert_close(
         "SSIM skimage sigma 11/6",
         loss::ssim(&a, &b, &window).unwrap(),
@@ -156,5 +166,9 @@ fn loss_windows_and_hssim_match_references() {
 #[test]
 fn ms_ssim_matches_numpy_reference() {
     let (a, b) = (pattern(64, 48, 3), perturbed(64, 48, 3));
-    assert_close("MS-SSIM", metrics::ms_ssim(&a, &b).unwrap(), MS_SSIM_RGB_64X48);
+    assert_close(
+        "MS-SSIM",
+        metrics::ms_ssim(&a, &b).unwrap(),
+        MS_SSIM_RGB_64X48,
+    );
 }

@@ -39,6 +39,9 @@ struct Saved<T> {
     coverage: T,
 }
 
+/// One pixel of the recorded forward pass: per-layer sums and the linear composite.
+type PixelRecord<T> = (Vec<Saved<T>>, [T; 3]);
+
 /// Everything the backward pass needs, recorded by [`render_with_tape`].
 pub struct Tape<T> {
     settings: RenderSettings,
@@ -95,7 +98,7 @@ pub fn render_with_tape<T: Real>(
     let kernel = Kernel::new(settings, stride);
     let big_r = kernel.big_r;
     let (w, h) = (stack.width, stack.height);
-    let rows: Vec<Vec<(Vec<Saved<T>>, [T; 3])>> = (0..h)
+    let rows: Vec<Vec<PixelRecord<T>>> = (0..h)
         .into_par_iter()
         .map(|py| {
             let row = (0..w)

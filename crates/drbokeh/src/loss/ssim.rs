@@ -28,7 +28,7 @@
 //! the centre, so the 21- and 31-tap windows would measure practically the same thing as
 //! the 11-tap one, and the larger windows would add no regional feedback. Note that this is
 //! *not* what scikit-image does when handed `sigma = k/6`: it always truncates its Gaussian
-//! at `3.5 sigma` (a 15-tap filter for `sigma = 11/6`), whatever `win_size` says.
+//! at `3.5 sigma` (a 13-tap filter, radius 6, for `sigma = 11/6`), whatever `win_size` says.
 
 use super::check_same_shape;
 use crate::{Error, Image, Real, Result};
@@ -428,8 +428,8 @@ mod tests {
     #[test]
     fn reflect_is_half_sample_symmetric() {
         let got: Vec<usize> = (-5..9).map(|i| reflect(i, 4)).collect();
-        // ... c d | d c b a | a b c d | d c b a | a b
-        assert_eq!(got, vec![2, 3, 3, 2, 1, 0, 0, 1, 2, 3, 3, 2, 1, 0]);
+        // i = -5..-1 | 0..3 | 4..8:  d d c b a | a b c d | d c b a a
+        assert_eq!(got, vec![3, 3, 2, 1, 0, 0, 1, 2, 3, 3, 2, 1, 0, 0]);
         // A 1-pixel plane reflects onto itself; small planes repeat periodically.
         assert!((-7..7).all(|i| reflect(i, 1) == 0));
     }
@@ -439,7 +439,7 @@ mod tests {
         let w = SsimWindow::skimage(1.5).unwrap();
         assert_eq!(w, SsimWindow::skimage_default());
         assert_eq!(w.size(), 11);
-        assert_eq!(SsimWindow::skimage(11.0 / 6.0).unwrap().size(), 15);
+        assert_eq!(SsimWindow::skimage(11.0 / 6.0).unwrap().size(), 13);
         let k = SsimWindow::sized(21).unwrap();
         assert_eq!((k.radius(), k.sigma()), (10, 3.5));
         let weights = k.weights();

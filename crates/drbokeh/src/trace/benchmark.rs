@@ -19,7 +19,9 @@
 
 use super::procedural::ProceduralKind;
 use super::sampling::Rng;
-use super::scene::{BillboardSpec, CameraSpec, LensSpec, RenderSpec, SceneSpec, TextureSpec, STANDARD_AIF_SPP};
+use super::scene::{
+    BillboardSpec, CameraSpec, LensSpec, RenderSpec, SceneSpec, TextureSpec, STANDARD_AIF_SPP,
+};
 use crate::Result;
 
 /// Horizontal field of view of the benchmark camera, degrees.
@@ -42,13 +44,24 @@ pub fn focus_target(index: usize) -> &'static str {
 
 /// The spec of benchmark scene `index` (of `count`) for master `seed`, `size` x `size`
 /// pixels, `spp` samples per pixel.
-pub fn scene_spec(seed: u64, index: usize, count: usize, size: usize, spp: usize) -> Result<SceneSpec> {
+pub fn scene_spec(
+    seed: u64,
+    index: usize,
+    count: usize,
+    size: usize,
+    spp: usize,
+) -> Result<SceneSpec> {
     let mut rng = Rng::from_words(&[seed, index as u64, 0xBE4C]);
-    let lens_f = super::SphericalLens::new(CURVATURE_RADIUS_MM, RIM_RADIUS_MM, ETA)?.focal_length_mm();
+    let lens_f =
+        super::SphericalLens::new(CURVATURE_RADIUS_MM, RIM_RADIUS_MM, ETA)?.focal_length_mm();
     // Target blur: log-spaced over the scenes, scrambled (37 is coprime to most counts).
     let count = count.max(1);
     let slot = if count > 1 { (index * 37) % count } else { 0 };
-    let u = if count > 1 { slot as f64 / (count - 1) as f64 } else { 0.5 };
+    let u = if count > 1 {
+        slot as f64 / (count - 1) as f64
+    } else {
+        0.5
+    };
     let target_px_512 = BLUR_RANGE_PX.0 * (BLUR_RANGE_PX.1 / BLUR_RANGE_PX.0).powf(u);
     let target_px = target_px_512 * size as f64 / 512.0;
     let px_per_radian = size as f64 / (2.0 * (0.5 * FOV_DEG.to_radians()).tan());
@@ -62,7 +75,9 @@ pub fn scene_spec(seed: u64, index: usize, count: usize, size: usize, spp: usize
         let bg = rng.range(3000.0, 8000.0);
         let near = rng.range(100.0, 180.0);
         let far_fg = bg * rng.range(0.25, 0.5);
-        let mut fg: Vec<f64> = (0..4).map(|_| near * (far_fg / near).powf(rng.uniform())).collect();
+        let mut fg: Vec<f64> = (0..4)
+            .map(|_| near * (far_fg / near).powf(rng.uniform()))
+            .collect();
         fg[0] = near;
         fg.sort_by(f64::total_cmp);
         if fg.windows(2).any(|w| w[1] / w[0] < 1.15) {
@@ -94,7 +109,12 @@ pub fn scene_spec(seed: u64, index: usize, count: usize, size: usize, spp: usize
     let mut billboards = Vec::new();
     for (k, &depth) in depths.iter().enumerate() {
         let (name, center, size, kind) = if k == 4 {
-            ("background".to_string(), [0.5, 0.5], [1.6, 1.6], ProceduralKind::Background)
+            (
+                "background".to_string(),
+                [0.5, 0.5],
+                [1.6, 1.6],
+                ProceduralKind::Background,
+            )
         } else {
             let s = rng.range(0.35, 0.8);
             let aspect = rng.range(0.75, 1.33);
@@ -148,9 +168,13 @@ pub fn manifest_entry(spec: &SceneSpec, index: usize, dir_name: &str) -> Result<
     let near = depths.iter().cloned().fold(f64::INFINITY, f64::min);
     let far = depths.iter().cloned().fold(0.0, f64::max);
     let zf = optics.focus_distance_mm();
-    let k = optics.aperture_radius_mm * optics.sensor_distance_mm * (1.0 / near - 1.0 / far) / optics.pixel_pitch_mm;
+    let k = optics.aperture_radius_mm * optics.sensor_distance_mm * (1.0 / near - 1.0 / far)
+        / optics.pixel_pitch_mm;
     let focus = (1.0 / zf - 1.0 / far) / (1.0 / near - 1.0 / far);
-    let max_coc = depths.iter().map(|&z| optics.coc_radius_px(z)).fold(0.0, f64::max);
+    let max_coc = depths
+        .iter()
+        .map(|&z| optics.coc_radius_px(z))
+        .fold(0.0, f64::max);
     Ok(serde_json::json!({
         "index": index,
         "dir": dir_name,

@@ -43,7 +43,11 @@ pub struct TraceOutputs {
 
 /// Traces a loaded scene: the defocused image at `spec.render.spp` and the pinhole passes
 /// at `spec.render.aif_spp`. Progress counts rows of both passes.
-pub fn trace_scene(scene: &Scene, spec: &scene::RenderSpec, progress: &dyn Progress) -> Result<TraceOutputs> {
+pub fn trace_scene(
+    scene: &Scene,
+    spec: &scene::RenderSpec,
+    progress: &dyn Progress,
+) -> Result<TraceOutputs> {
     let h = scene.optics.height_px as u64;
     progress.start(2 * h);
     let pinhole = render_pinhole(scene, spec.aif_spp, spec.seed, progress)?;
@@ -60,7 +64,11 @@ pub fn encode_image(linear: &Image<f32>) -> Image<f32> {
         width: linear.width,
         height: linear.height,
         channels: linear.channels,
-        data: linear.data.iter().map(|&v| encode_display(v as f64) as f32).collect(),
+        data: linear
+            .data
+            .iter()
+            .map(|&v| encode_display(v as f64) as f32)
+            .collect(),
     }
 }
 
@@ -187,7 +195,12 @@ fn write_grey16(path: &Path, img: &Image<f32>) -> Result<()> {
 /// Writes one scene's outputs into directory `dir`, atomically: everything is written into
 /// a temporary directory beside it, which is renamed to `dir` only when complete. Fails if
 /// `dir` already exists. `spec` is recorded (with `derived` filled in) as `scene.json`.
-pub fn write_scene_dir(dir: &Path, spec: &SceneSpec, scene: &Scene, out: &TraceOutputs) -> Result<()> {
+pub fn write_scene_dir(
+    dir: &Path,
+    spec: &SceneSpec,
+    scene: &Scene,
+    out: &TraceOutputs,
+) -> Result<()> {
     if dir.exists() {
         return Err(Error::file(dir, "output directory already exists"));
     }
@@ -196,7 +209,10 @@ pub fn write_scene_dir(dir: &Path, spec: &SceneSpec, scene: &Scene, out: &TraceO
         _ => Path::new("."),
     };
     if !parent.is_dir() {
-        return Err(Error::file(parent, "output's parent directory does not exist"));
+        return Err(Error::file(
+            parent,
+            "output's parent directory does not exist",
+        ));
     }
     let tmp = tempfile::Builder::new()
         .prefix(".drbokeh-scene-")
@@ -228,7 +244,8 @@ pub fn write_scene_dir(dir: &Path, spec: &SceneSpec, scene: &Scene, out: &TraceO
     io::write_stack(&t.join("layers.npz"), &layer_stack(scene, &out.pinhole)?)?;
     let mut record = spec.clone();
     record.derived = Some(derived_record(scene));
-    let json = serde_json::to_string_pretty(&record).map_err(|e| Error::file(dir, e.to_string()))?;
+    let json =
+        serde_json::to_string_pretty(&record).map_err(|e| Error::file(dir, e.to_string()))?;
     let scene_json = t.join("scene.json");
     io::write_atomic(&scene_json, |w| {
         use std::io::Write;
@@ -236,7 +253,8 @@ pub fn write_scene_dir(dir: &Path, spec: &SceneSpec, scene: &Scene, out: &TraceO
             .and_then(|_| w.write_all(b"\n"))
             .map_err(|e| Error::file(&scene_json, format!("write failed: {e}")))
     })?;
-    std::fs::rename(t, dir).map_err(|e| Error::file(dir, format!("cannot move output into place: {e}")))?;
+    std::fs::rename(t, dir)
+        .map_err(|e| Error::file(dir, format!("cannot move output into place: {e}")))?;
     Ok(())
 }
 

@@ -210,7 +210,11 @@ pub struct TracedFocus {
 /// Finds the paraxial best focus of `lens` by tracing a fan of parallel rays at heights up
 /// to `max_height_mm` (choose well below the rim for the paraxial limit). The lens is
 /// symmetric, so the focus found on the scene side equals the one on the sensor side.
-pub fn trace_paraxial_focus(lens: &SphericalLens, max_height_mm: f64, rays: usize) -> Result<TracedFocus> {
+pub fn trace_paraxial_focus(
+    lens: &SphericalLens,
+    max_height_mm: f64,
+    rays: usize,
+) -> Result<TracedFocus> {
     let z_start = lens.rear_vertex_z_mm() + 10.0;
     // Least squares over z: minimise sum_i (x_i + s_i (z - z0_i))^2 on the exit rays.
     let (mut num, mut den) = (0.0, 0.0);
@@ -223,7 +227,12 @@ pub fn trace_paraxial_focus(lens: &SphericalLens, max_height_mm: f64, rays: usiz
         };
         let out = lens
             .trace_from_sensor_side(&ray, lens.rim_radius_mm)
-            .ok_or_else(|| Error::param("paraxial trace", format!("ray at height {h} mm was blocked")))?;
+            .ok_or_else(|| {
+                Error::param(
+                    "paraxial trace",
+                    format!("ray at height {h} mm was blocked"),
+                )
+            })?;
         let slope = out.dir.x / out.dir.z; // dx/dz
         let x_at_zero = out.origin.x - slope * out.origin.z; // x at z = 0
         num += x_at_zero * slope;
@@ -498,10 +507,17 @@ mod tests {
             let traced = trace_paraxial_focus(&l, 1e-3 * ra, 8).unwrap();
             let f = l.focal_length_mm();
             let rel = (traced.focal_length_mm - f).abs() / f;
-            assert!(rel < 0.005, "Rc {rc}, Ra {ra}: traced {} vs lensmaker {f}", traced.focal_length_mm);
+            assert!(
+                rel < 0.005,
+                "Rc {rc}, Ra {ra}: traced {} vs lensmaker {f}",
+                traced.focal_length_mm
+            );
             let printed = l.focal_length_printed_variant_mm();
             let rel_printed = (traced.focal_length_mm - printed).abs() / printed;
-            assert!(rel_printed > 0.005, "Rc {rc}, Ra {ra}: printed variant {printed} also matches");
+            assert!(
+                rel_printed > 0.005,
+                "Rc {rc}, Ra {ra}: printed variant {printed} also matches"
+            );
             // The principal plane the sensor distance is measured from is where tracing puts it.
             let plane = -l.rear_principal_plane_z_mm(); // symmetric lens, scene side
             assert!((traced.principal_plane_z_mm - plane).abs() < 1e-3 * f);

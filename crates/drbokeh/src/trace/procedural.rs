@@ -156,10 +156,13 @@ impl Canvas {
                 [1.0, 1.0, 0.95]
             };
             let col = [tint[0] * gain, tint[1] * gain, tint[2] * gain];
-            self.paint((cx - r - 1.0, cx + r + 1.0, cy - r - 1.0, cy + r + 1.0), |x, y| {
-                let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() - r;
-                Some((col, coverage(d, 1.0)))
-            });
+            self.paint(
+                (cx - r - 1.0, cx + r + 1.0, cy - r - 1.0, cy + r + 1.0),
+                |x, y| {
+                    let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() - r;
+                    Some((col, coverage(d, 1.0)))
+                },
+            );
         }
     }
 }
@@ -246,7 +249,12 @@ fn foliage(c: &mut Canvas, rng: &mut Rng, seed: u64) {
         let stem_col = [0.05, 0.04, 0.02];
         let (ax, ay) = root;
         c.paint(
-            (cx.min(ax) - 3.0, cx.max(ax) + 3.0, cy.min(ay) - 3.0, cy.max(ay) + 3.0),
+            (
+                cx.min(ax) - 3.0,
+                cx.max(ax) + 3.0,
+                cy.min(ay) - 3.0,
+                cy.max(ay) + 3.0,
+            ),
             |x, y| {
                 let d = segment_distance((x, y), (cx, cy), (ax, ay));
                 let a = if stem_w < 1.0 {
@@ -267,25 +275,37 @@ fn foliage(c: &mut Canvas, rng: &mut Rng, seed: u64) {
             hue[2] + rng.range(0.0, 0.05),
         ];
         let hole = if rng.uniform() < 0.4 {
-            Some((rng.range(-0.4, 0.4) * a_ax, 0.0, rng.range(0.15, 0.35) * b_ax))
+            Some((
+                rng.range(-0.4, 0.4) * a_ax,
+                0.0,
+                rng.range(0.15, 0.35) * b_ax,
+            ))
         } else {
             None
         };
         let vseed = seed ^ (i as u64 * 7919);
-        c.paint((cx - a_ax - 4.0, cx + a_ax + 4.0, cy - a_ax - 4.0, cy + a_ax + 4.0), |x, y| {
-            let (dx, dy) = (x - cx, y - cy);
-            let (u, v) = (dx * ca + dy * sa, -dx * sa + dy * ca);
-            let q = ((u / a_ax).powi(2) + (v / b_ax).powi(2)).sqrt();
-            let d = (q - 1.0) * b_ax;
-            let mut a = coverage(d, soft);
-            if let Some((hx, hy, hr)) = hole {
-                let dh = ((u - hx).powi(2) + (v - hy).powi(2)).sqrt() - hr;
-                a *= 1.0 - coverage(dh, 1.5);
-            }
-            let vein = if v.abs() < 0.8 { 1.4 } else { 1.0 };
-            let n = 0.7 + 0.6 * fbm(u * 0.05, v * 0.05, vseed);
-            Some((col.map(|k| k * n * vein), a))
-        });
+        c.paint(
+            (
+                cx - a_ax - 4.0,
+                cx + a_ax + 4.0,
+                cy - a_ax - 4.0,
+                cy + a_ax + 4.0,
+            ),
+            |x, y| {
+                let (dx, dy) = (x - cx, y - cy);
+                let (u, v) = (dx * ca + dy * sa, -dx * sa + dy * ca);
+                let q = ((u / a_ax).powi(2) + (v / b_ax).powi(2)).sqrt();
+                let d = (q - 1.0) * b_ax;
+                let mut a = coverage(d, soft);
+                if let Some((hx, hy, hr)) = hole {
+                    let dh = ((u - hx).powi(2) + (v - hy).powi(2)).sqrt() - hr;
+                    a *= 1.0 - coverage(dh, 1.5);
+                }
+                let vein = if v.abs() < 0.8 { 1.4 } else { 1.0 };
+                let n = 0.7 + 0.6 * fbm(u * 0.05, v * 0.05, vseed);
+                Some((col.map(|k| k * n * vein), a))
+            },
+        );
     }
     let n = rng.below(8) + 3;
     c.highlights(rng, n, true, false);
@@ -384,11 +404,19 @@ fn fence(c: &mut Canvas, rng: &mut Rng) {
         // Hole: a rounded square inside each cell.
         let (fx, fy) = ((x - ox).rem_euclid(cell), (y - oy).rem_euclid(cell));
         let half = 0.5 * (cell - bar);
-        let (qx, qy) = ((fx - 0.5 * cell).abs() - (half - corner), (fy - 0.5 * cell).abs() - (half - corner));
-        let hole_d = (qx.max(0.0).powi(2) + qy.max(0.0).powi(2)).sqrt() + qx.max(qy).min(0.0) - corner;
+        let (qx, qy) = (
+            (fx - 0.5 * cell).abs() - (half - corner),
+            (fy - 0.5 * cell).abs() - (half - corner),
+        );
+        let hole_d =
+            (qx.max(0.0).powi(2) + qy.max(0.0).powi(2)).sqrt() + qx.max(qy).min(0.0) - corner;
         let a_mesh = 1.0 - coverage(hole_d, 1.2);
-        let (ex, ey) = ((x - 0.5 * w).abs() - (0.5 * w - mx - outline_r), (y - 0.5 * h).abs() - (0.5 * h - my - outline_r));
-        let out_d = (ex.max(0.0).powi(2) + ey.max(0.0).powi(2)).sqrt() + ex.max(ey).min(0.0) - outline_r;
+        let (ex, ey) = (
+            (x - 0.5 * w).abs() - (0.5 * w - mx - outline_r),
+            (y - 0.5 * h).abs() - (0.5 * h - my - outline_r),
+        );
+        let out_d =
+            (ex.max(0.0).powi(2) + ey.max(0.0).powi(2)).sqrt() + ex.max(ey).min(0.0) - outline_r;
         let a = a_mesh * coverage(out_d, 2.0);
         let shade = 0.6 + 0.4 * ((fx / cell) * std::f64::consts::PI).sin();
         Some((col.map(|k| k * shade), a))
@@ -408,7 +436,11 @@ fn fluff(c: &mut Canvas, rng: &mut Rng, seed: u64) {
         .map(|_| {
             let a = rng.range(0.0, std::f64::consts::TAU);
             let r = rng.range(0.0, 0.6) * radius;
-            (cx + r * a.cos(), cy + r * a.sin(), rng.range(0.04, 0.12) * s)
+            (
+                cx + r * a.cos(),
+                cy + r * a.sin(),
+                rng.range(0.04, 0.12) * s,
+            )
         })
         .collect();
     let nseed = seed ^ 0xF1;
@@ -417,7 +449,8 @@ fn fluff(c: &mut Canvas, rng: &mut Rng, seed: u64) {
         let r = (dx * dx + dy * dy).sqrt();
         let theta = dy.atan2(dx);
         // Outline wobble plus fine angular "hairs" in the fringe.
-        let wobble = 1.0 + 0.15 * (fbm(theta.cos() * 2.0 + 5.0, theta.sin() * 2.0 + 5.0, nseed) - 0.5);
+        let wobble =
+            1.0 + 0.15 * (fbm(theta.cos() * 2.0 + 5.0, theta.sin() * 2.0 + 5.0, nseed) - 0.5);
         let hair = fbm(theta * 40.0, r * 0.02, nseed ^ 3);
         let d = r - radius * wobble - fringe * (hair - 0.5) * 2.0;
         let mut a = coverage(d, fringe);
@@ -441,15 +474,27 @@ mod tests {
         let bg = generate(ProceduralKind::Background, 3, 160, 160);
         assert_eq!(bg, generate(ProceduralKind::Background, 3, 160, 160));
         assert_ne!(bg, generate(ProceduralKind::Background, 4, 160, 160));
-        assert!(bg.data.iter().all(|t| (t[3] - 1.0).abs() < 1e-5), "background must be opaque");
-        assert!(bg.data.iter().any(|t| t[0] > 1.0), "background needs highlights above 1");
+        assert!(
+            bg.data.iter().all(|t| (t[3] - 1.0).abs() < 1e-5),
+            "background must be opaque"
+        );
+        assert!(
+            bg.data.iter().any(|t| t[0] > 1.0),
+            "background needs highlights above 1"
+        );
         for kind in ProceduralKind::FOREGROUNDS {
             let t = generate(kind, 11, 200, 200);
             let soft = t.data.iter().filter(|t| t[3] > 0.02 && t[3] < 0.98).count();
             let empty = t.data.iter().filter(|t| t[3] < 0.02).count();
-            assert!(soft > 100, "{kind:?} needs soft alpha, has {soft} partial texels");
+            assert!(
+                soft > 100,
+                "{kind:?} needs soft alpha, has {soft} partial texels"
+            );
             assert!(empty > 1000, "{kind:?} needs transparent regions");
-            assert!(t.data.iter().all(|t| (0.0..=1.0).contains(&t[3]) && t[0] >= 0.0));
+            assert!(t
+                .data
+                .iter()
+                .all(|t| (0.0..=1.0).contains(&t[3]) && t[0] >= 0.0));
         }
     }
 }

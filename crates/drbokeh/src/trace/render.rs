@@ -48,7 +48,12 @@ fn side(spp: usize, name: &str) -> Result<usize> {
 /// lens. Rays the lens blocks (outside the rim, total internal reflection) are left out of
 /// the average, so vignetting does not darken the frame. Reports one progress unit per row
 /// (the caller calls `progress.start`).
-pub fn render_defocus(scene: &Scene, spp: usize, seed: u64, progress: &dyn Progress) -> Result<Image<f32>> {
+pub fn render_defocus(
+    scene: &Scene,
+    spp: usize,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<Image<f32>> {
     let n = side(spp, "render.spp")?;
     let o = &scene.optics;
     let (w, h) = (o.width_px, o.height_px);
@@ -110,7 +115,12 @@ pub struct PinholeImages {
 /// Renders the all-in-focus image, the per-billboard layers and the depth map through the
 /// chief ray (the lens stopped down to the centre of its stop, so the projection equals
 /// that of the defocused image), with `spp` stratified pixel-area samples.
-pub fn render_pinhole(scene: &Scene, spp: usize, seed: u64, progress: &dyn Progress) -> Result<PinholeImages> {
+pub fn render_pinhole(
+    scene: &Scene,
+    spp: usize,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<PinholeImages> {
     let n = side(spp, "render.aif_spp")?;
     let o = &scene.optics;
     let (w, h) = (o.width_px, o.height_px);
@@ -133,7 +143,9 @@ pub fn render_pinhole(scene: &Scene, spp: usize, seed: u64, progress: &dyn Progr
                     let mut count = 0u32;
                     for p in pix.iter() {
                         let sensor = o.sensor_point(x as f64 + p.0, y as f64 + p.1);
-                        let Some(ray) = o.chief_ray(sensor) else { continue };
+                        let Some(ray) = o.chief_ray(sensor) else {
+                            continue;
+                        };
                         count += 1;
                         let mut transmit = 1.0f64;
                         for (l, b) in scene.billboards.iter().enumerate() {
@@ -159,7 +171,11 @@ pub fn render_pinhole(scene: &Scene, spp: usize, seed: u64, progress: &dyn Progr
                         let a = lsum[l][3] * inv;
                         let base = (l * w + x) * 4;
                         for c in 0..3 {
-                            layers[base + c] = if a > 0.0 { (lsum[l][c] * inv / a) as f32 } else { 0.0 };
+                            layers[base + c] = if a > 0.0 {
+                                (lsum[l][c] * inv / a) as f32
+                            } else {
+                                0.0
+                            };
                         }
                         layers[base + 3] = a.clamp(0.0, 1.0) as f32;
                         vis[l * w + x] = (lsum[l][4] * inv) as f32;

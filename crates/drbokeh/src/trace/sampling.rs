@@ -93,8 +93,14 @@ pub fn stratified_pattern(
     let inv = 1.0 / n as f64;
     for j in 0..n {
         for i in 0..n {
-            pixel.push(((i as f64 + rng.uniform()) * inv, (j as f64 + rng.uniform()) * inv));
-            let (u, v) = ((i as f64 + rng.uniform()) * inv, (j as f64 + rng.uniform()) * inv);
+            pixel.push((
+                (i as f64 + rng.uniform()) * inv,
+                (j as f64 + rng.uniform()) * inv,
+            ));
+            let (u, v) = (
+                (i as f64 + rng.uniform()) * inv,
+                (j as f64 + rng.uniform()) * inv,
+            );
             pupil.push(concentric_disc(u, v));
         }
     }

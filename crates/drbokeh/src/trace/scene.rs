@@ -212,7 +212,8 @@ pub struct SceneSpec {
 impl SceneSpec {
     /// Parses a scene file's text; `what` names it in errors.
     pub fn from_json(text: &str, what: &Path) -> Result<Self> {
-        serde_json::from_str(text).map_err(|e| Error::file(what, format!("invalid scene JSON: {e}")))
+        serde_json::from_str(text)
+            .map_err(|e| Error::file(what, format!("invalid scene JSON: {e}")))
     }
 
     /// Reads a scene file.
@@ -266,7 +267,10 @@ impl SceneSpec {
         if !cam.fov_deg.is_finite() || cam.fov_deg <= 0.0 || cam.fov_deg >= 170.0 {
             return Err(Error::param(
                 "camera.fov_deg",
-                format!("field of view must be in (0, 170) degrees, got {}", cam.fov_deg),
+                format!(
+                    "field of view must be in (0, 170) degrees, got {}",
+                    cam.fov_deg
+                ),
             ));
         }
         let pitch = 2.0 * d_i * (0.5 * cam.fov_deg.to_radians()).tan() / cam.width_px as f64;
@@ -276,11 +280,16 @@ impl SceneSpec {
     /// Checks sampling and billboard parameters (not the texture files).
     pub fn validate(&self) -> Result<()> {
         self.optics()?;
-        for (name, v) in [("render.spp", self.render.spp), ("render.aif_spp", self.render.aif_spp)] {
+        for (name, v) in [
+            ("render.spp", self.render.spp),
+            ("render.aif_spp", self.render.aif_spp),
+        ] {
             if strata_side(v).is_none() || v > 1 << 20 {
                 return Err(Error::param(
                     name,
-                    format!("must be a perfect square between 1 and 2^20 (e.g. 256, 1024), got {v}"),
+                    format!(
+                        "must be a perfect square between 1 and 2^20 (e.g. 256, 1024), got {v}"
+                    ),
                 ));
             }
         }
@@ -293,10 +302,15 @@ impl SceneSpec {
             if !b.depth_mm.is_finite() || b.depth_mm <= f {
                 return Err(Error::param(
                     format!("{what}.depth_mm"),
-                    format!("depth must exceed the focal length f = {f:.4} mm, got {}", b.depth_mm),
+                    format!(
+                        "depth must exceed the focal length f = {f:.4} mm, got {}",
+                        b.depth_mm
+                    ),
                 ));
             }
-            if b.size.iter().any(|v| !v.is_finite() || *v <= 0.0 || *v > 100.0)
+            if b.size
+                .iter()
+                .any(|v| !v.is_finite() || *v <= 0.0 || *v > 100.0)
                 || b.center.iter().any(|v| !v.is_finite() || v.abs() > 100.0)
             {
                 return Err(Error::param(
@@ -346,9 +360,18 @@ impl SceneSpec {
                 TextureSpec::Solid { color, alpha, gain } => {
                     Texture::solid(color.map(|c| decode_display(c) * gain), *alpha)
                 }
-                TextureSpec::Procedural { kind, seed } => procedural::generate(*kind, *seed, tw, th),
+                TextureSpec::Procedural { kind, seed } => {
+                    procedural::generate(*kind, *seed, tw, th)
+                }
             };
-            billboards.push(Billboard::place(&optics, b.name.clone(), b.depth_mm, b.center, b.size, texture));
+            billboards.push(Billboard::place(
+                &optics,
+                b.name.clone(),
+                b.depth_mm,
+                b.center,
+                b.size,
+                texture,
+            ));
         }
         Scene::new(optics, billboards)
     }

@@ -131,10 +131,17 @@ impl Texture {
                 None => 1.0,
             };
             if !px.iter().all(|v| v.is_finite()) || !(0.0..=1.0).contains(&a) {
-                return Err(Error::file(path, "texture has non-finite or out-of-range values"));
+                return Err(Error::file(
+                    path,
+                    "texture has non-finite or out-of-range values",
+                ));
             }
             let lin = |v: f32| {
-                let v = if linear { v.max(0.0) as f64 } else { decode_display(v as f64) };
+                let v = if linear {
+                    v.max(0.0) as f64
+                } else {
+                    decode_display(v as f64)
+                };
                 (v * gain) as f32 * a
             };
             data.push([lin(px[0]), lin(px[1]), lin(px[2]), a]);
