@@ -4,6 +4,8 @@
 mod args;
 mod progress;
 mod render;
+mod trace_cmd;
+mod vjp;
 
 use clap::{Parser, Subcommand};
 
@@ -29,12 +31,21 @@ struct Cli {
 enum Command {
     /// Render lens blur from a layer stack, an image + disparity map, or the built-in demo.
     Render(Box<render::RenderArgs>),
+    /// Exact gradients of sum(G * render) w.r.t. colour, alpha, disparity, blur and focus.
+    Vjp(Box<vjp::VjpArgs>),
+    /// Path-trace a billboard scene through a real (thick, spherical) lens: ground truth.
+    Trace(Box<trace_cmd::TraceArgs>),
+    /// Make the ray-traced ground-truth benchmark.
+    Benchmark(Box<trace_cmd::BenchmarkArgs>),
 }
 
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(a) => render::run(&a),
+        Command::Vjp(a) => vjp::run(&a),
+        Command::Trace(a) => trace_cmd::run_trace(&a),
+        Command::Benchmark(a) => trace_cmd::run_benchmark(&a),
     };
     if let Err(e) = result {
         eprintln!("drbokeh: error: {e:#}");

@@ -537,3 +537,27 @@ impl<T: Real> Tape<T> {
         out
     }
 }
+
+impl<T: Real> Gradients<T> {
+    /// The published kernel's training heuristic ("gradient clipping"), offered as an
+    /// explicit option and off by default: per-pixel gradient values whose magnitude lies
+    /// in `[lo, hi)` are raised to `hi`, keeping their sign (the paper's `lo = 1e-6`,
+    /// `hi = 1e-2`). The result is no longer the gradient of the loss.
+    pub fn rescale_small(&mut self, lo: f64, hi: f64) {
+        let (lo, hi) = (T::c(lo), T::c(hi));
+        for l in &mut self.layers {
+            for v in l
+                .rgb
+                .data
+                .iter_mut()
+                .chain(&mut l.alpha.data)
+                .chain(&mut l.disparity.data)
+            {
+                let m = v.abs();
+                if m >= lo && m < hi {
+                    *v = if *v > T::zero() { hi } else { -hi };
+                }
+            }
+        }
+    }
+}

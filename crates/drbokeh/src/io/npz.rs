@@ -2,6 +2,7 @@
 //! float64; uint8/uint16 colour is scaled to [0, 1].
 
 use super::{open, write_atomic};
+use crate::engine::adjoint::Gradients;
 use crate::image::{check_dimensions, Image};
 use crate::stack::{Layer, LayerStack};
 use crate::{Error, Real, Result};
@@ -122,5 +123,65 @@ pub fn write_stack<T: Real>(path: &Path, stack: &LayerStack<T>) -> Result<()> {
         npz.add_array("disparity", &disp).map_err(err)?;
         npz.finish().map_err(err)?;
         Ok(())
+    })
+}
+
+/// Writes gradients as NPZ: `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W), and the
+/// scalars `blur` and `focus` (0-d arrays). float64 when `T` is f64, float32 otherwise.
+pub fn write_gradients<T: Real>(
+    path: &Path,
+    grads: &Gradients<T>,
+    width: usize,
+    height: usize,
+) -> Result<()> {
+    fn write_typed<
+        E: ndarray_npy::WritableElement + Copy,
+        T: Real,
+        W: std::io::Write + std::io::Seek,
+    >(
+        out: W,
+        grads: &Gradients<T>,
+        (w, h): (usize, usize),
+        conv: impl Fn(T) -> E,
+        err: impl Fn(ndarray_npy::WriteNpzError) -> Error,
+    ) -> Result<()> {
+        let n = grads.layers.len();
+        let cat = |f: &dyn Fn(&crate::engine::adjoint::LayerGradients<T>) -> &Image<T>| -> Vec<E> {
+            grads
+                .layers
+                .iter()
+                .flat_map(|l| f(l).data.iter().map(|&v| conv(v)))
+                .collect()
+        };
+        let mut npz = NpzWriter::new(out);
+        npz.add_array(
+            "rgb",
+            &ndarray::Array4::from_shape_vec((n, h, w, 3), cat(&|l| &l.rgb)).unwrap(),
+        )
+        .map_err(&err)?;
+        npz.add_array(
+            "alpha",
+            &ndarray::Array3::from_shape_vec((n, h, w), cat(&|l| &l.alpha)).unwrap(),
+        )
+        .map_err(&err)?;
+        npz.add_array(
+            "disparity",
+            &ndarray::Array3::from_shape_vec((n, h, w), cat(&|l| &l.disparity)).unwrap(),
+        )
+        .map_err(&err)?;
+        npz.add_array("blur", &ndarray::arr0(conv(T::c(grads.blur_k))))
+            .map_err(&err)?;
+        npz.add_array("focus", &ndarray::arr0(conv(T::c(grads.focus))))
+            .map_err(&err)?;
+        npz.finish().map_err(&err)?;
+        Ok(())
+    }
+    write_atomic(path, |out| {
+        let err = |e: ndarray_npy::WriteNpzError| Error::file(path, format!("write failed: {e}"));
+        if std::any::TypeId::of::<T>() == std::any::TypeId::of::<f64>() {
+            write_typed(out, grads, (width, height), |v: T| v.f64(), err)
+        } else {
+            write_typed(out, grads, (width, height), |v: T| v.f64() as f32, err)
+        }
     })
 }

@@ -157,6 +157,27 @@ fn read_npy_any(path: &Path) -> Result<ndarray::ArrayD<f64>> {
         })
 }
 
+/// Reads an `(H, W, C)` NPY array (float32, float64 or uint16) as an image with `channels`
+/// channels; `what` names its role in messages.
+pub fn read_npy_image<T: Real>(path: &Path, channels: usize, what: &str) -> Result<Image<T>> {
+    let arr = read_npy_any(path)?;
+    let s = arr.shape().to_vec();
+    let (h, w) = match s.as_slice() {
+        [h, w, c] if *c == channels => (*h, *w),
+        [h, w] if channels == 1 => (*h, *w),
+        _ => {
+            return Err(Error::file(
+                path,
+                format!("{what} has shape {s:?}, expected (H, W, {channels})"),
+            ))
+        }
+    };
+    check_dimensions(what, w, h).map_err(|e| e.in_file(path))?;
+    let out = Image::from_vec(w, h, channels, arr.iter().map(|&v| T::c(v)).collect())?;
+    out.check_finite(what).map_err(|e| e.in_file(path))?;
+    Ok(out)
+}
+
 /// Reads an alpha matte: a grey image, or the alpha channel of a grey+alpha / RGBA image.
 pub fn read_matte<T: Real>(path: &Path) -> Result<Image<T>> {
     if extension(path) == "npy" || extension(path) == "npz" {

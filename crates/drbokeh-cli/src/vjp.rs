@@ -1,0 +1,98 @@
+//! `drbokeh vjp`: gradients of `sum(G * render)` with respect to every input.
+
+use crate::args::{load_scene, settings_for, CameraArgs, ExecArgs, SceneArgs};
+use crate::progress::Bar;
+use anyhow::{bail, Result};
+use clap::Args;
+use drbokeh::Real;
+use std::path::PathBuf;
+
+/// Vector-Jacobian product of the render: the exact gradient of `sum(G * render)`.
+///
+/// `render` is what `drbokeh render --output x.npy` writes with the same flags (display-encoded
+/// values). The output NPZ holds `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W) and the
+/// scalars `blur` (d/dK) and `focus` (d/df); float64 with --f64.
+///
+/// Example:
+///   drbokeh vjp --layers stack.npz --grad-output g.npy --focus 0.4 --blur 30 --window 71 --f64 --output grads.npz
+#[derive(Args, Debug)]
+#[command(verbatim_doc_comment)]
+pub struct VjpArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    #[command(flatten)]
+    pub exec: ExecArgs,
+
+    /// Upstream gradient G: NPY (H, W, 3), float32 or float64, the render's shape.
+    #[arg(long, value_name = "G.npy")]
+    pub grad_output: PathBuf,
+
+    /// Apply the published kernel's gradient rescaling (magnitudes in [1e-6, 1e-2) raised to
+    /// 1e-2). A training heuristic: the result is no longer the exact gradient.
+    #[arg(long)]
+    pub rescale_small_gradients: bool,
+
+    /// Output NPZ of gradients.
+    #[arg(long, short, value_name = "GRADS.npz")]
+    pub output: PathBuf,
+}
+
+pub fn run(a: &VjpArgs) -> Result<()> {
+    if !a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npz"))
+    {
+        bail!(
+            "{}: the gradient output must be an .npz file",
+            a.output.display()
+        );
+    }
+    if a.exec.engine != "threaded" {
+        bail!("invalid parameter --engine: vjp runs on the threaded engine only");
+    }
+    a.exec.init_threads()?;
+    if a.exec.f64 {
+        run_typed::<f64>(a)
+    } else {
+        run_typed::<f32>(a)
+    }
+}
+
+fn run_typed<T: Real>(a: &VjpArgs) -> Result<()> {
+    let stack = load_scene::<T>(&a.scene, a.camera.gamma, a.camera.offset)?;
+    let (settings, _) = settings_for(&a.camera, &a.scene, &stack)?;
+    let g = drbokeh::io::read_npy_image::<T>(&a.grad_output, 3, "output gradient")?;
+    if g.width != stack.width || g.height != stack.height {
+        bail!(
+            "{}: gradient is {}x{}, but the render is {}x{}",
+            a.grad_output.display(),
+            g.width,
+            g.height,
+            stack.width,
+            stack.height
+        );
+    }
+    let bar = Bar::new("forward", a.exec.quiet);
+    let (_, tape) = drbokeh::render_with_tape(&stack, &settings, &bar)?;
+    bar.finish();
+    let bar = Bar::new("backward", a.exec.quiet);
+    let mut grads = tape.backward(&g, &bar)?;
+    bar.finish();
+    if a.rescale_small_gradients {
+        grads.rescale_small(1e-6, 1e-2);
+    }
+    drbokeh::io::write_gradients(&a.output, &grads, stack.width, stack.height)?;
+    if !a.exec.quiet {
+        eprintln!(
+            "drbokeh: gradients of {} layer(s) -> {} (d/dK = {:.6e}, d/df = {:.6e})",
+            stack.layers.len(),
+            a.output.display(),
+            grads.blur_k,
+            grads.focus
+        );
+    }
+    Ok(())
+}
