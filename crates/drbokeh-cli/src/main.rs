@@ -2,6 +2,7 @@
 //! all work is done by the `drbokeh` library.
 
 mod args;
+mod dfd;
 mod progress;
 mod render;
 mod trace_cmd;
@@ -33,6 +34,10 @@ enum Command {
     Render(Box<render::RenderArgs>),
     /// Exact gradients of sum(G * render) w.r.t. colour, alpha, disparity, blur and focus.
     Vjp(Box<vjp::VjpArgs>),
+    /// Depth from defocus: recover disparity from an all-in-focus + defocused pair.
+    Dfd(Box<dfd::DfdArgs>),
+    /// Depth-from-defocus experiment over synthetic pairs: layers x loss combinations.
+    DfdEval(Box<dfd::DfdEvalArgs>),
     /// Path-trace a billboard scene through a real (thick, spherical) lens: ground truth.
     Trace(Box<trace_cmd::TraceArgs>),
     /// Make the ray-traced ground-truth benchmark.
@@ -44,6 +49,8 @@ fn main() {
     let result = match cli.command {
         Command::Render(a) => render::run(&a),
         Command::Vjp(a) => vjp::run(&a),
+        Command::Dfd(a) => dfd::run(&a),
+        Command::DfdEval(a) => dfd::run_eval(&a),
         Command::Trace(a) => trace_cmd::run_trace(&a),
         Command::Benchmark(a) => trace_cmd::run_benchmark(&a),
     };

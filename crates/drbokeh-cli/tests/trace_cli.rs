@@ -57,7 +57,13 @@ fn trace_writes_every_output_and_a_reusable_record() {
     let scene = dir.path().join("scene.json");
     std::fs::write(&scene, tiny_scene(LENS, "")).unwrap();
     let out = dir.path().join("out");
-    let o = drbokeh(&["trace", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let o = drbokeh(&[
+        "trace",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in FILES {
         assert!(out.join(f).is_file(), "missing {f}");
@@ -70,23 +76,47 @@ fn trace_writes_every_output_and_a_reusable_record() {
     assert_eq!(d[0], 1.0);
     assert_eq!(d[3], 0.0);
     assert!(d.windows(2).all(|w| w[0] > w[1]));
-    let rec: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("scene.json")).unwrap()).unwrap();
+    let rec: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("scene.json")).unwrap()).unwrap();
     let derived = &rec["derived"];
     let k = derived["blur"].as_f64().unwrap();
     let focus = derived["focus"].as_f64().unwrap();
     assert!(k > 0.0);
     // Focus at 400 mm = the second billboard's disparity.
-    assert!((focus - d[1] as f64).abs() < 1e-6, "focus {focus} vs {}", d[1]);
-    assert!(derived["display_encoding"].as_str().unwrap().contains("2.2"));
+    assert!(
+        (focus - d[1] as f64).abs() < 1e-6,
+        "focus {focus} vs {}",
+        d[1]
+    );
+    assert!(derived["display_encoding"]
+        .as_str()
+        .unwrap()
+        .contains("2.2"));
     // The record is itself a scene file: tracing it again gives the same bytes.
     let again = dir.path().join("again");
-    let o = drbokeh(&["trace", out.join("scene.json").to_str().unwrap(), "--out", again.to_str().unwrap(), "-q"]);
+    let o = drbokeh(&[
+        "trace",
+        out.join("scene.json").to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+        "-q",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in ["bokeh.png", "bokeh.exr", "layers.npz", "depth.npy"] {
-        assert_eq!(std::fs::read(out.join(f)).unwrap(), std::fs::read(again.join(f)).unwrap(), "{f}");
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(again.join(f)).unwrap(),
+            "{f}"
+        );
     }
     // An existing output directory is refused without --force.
-    let o = drbokeh(&["trace", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let o = drbokeh(&[
+        "trace",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("already exists"));
 }
@@ -96,13 +126,22 @@ fn assert_fails_cleanly(scene_text: &str, expect: &str) {
     let scene = dir.path().join("scene.json");
     std::fs::write(&scene, scene_text).unwrap();
     let out = dir.path().join("out");
-    let o = drbokeh(&["trace", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let o = drbokeh(&[
+        "trace",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     assert!(!o.status.success(), "should fail: {expect}");
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(err.contains(expect), "expected '{expect}' in: {err}");
     assert!(!out.exists(), "partial output left behind");
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(leftovers.len(), 1, "stray files: {leftovers:?}");
 }
 
@@ -113,7 +152,10 @@ fn bad_input_fails_with_a_clear_message_and_no_output() {
     assert_fails_cleanly(&tiny_scene(LENS, missing), "no_such_texture.png");
     let wide = r#"{ "model": "spherical", "curvature_radius_mm": 10.0, "rim_radius_mm": 12.0, "eta": 1.5 }"#;
     assert_fails_cleanly(&tiny_scene(wide, ""), "rim radius");
-    let near_sensor = tiny_scene(LENS, "").replace("\"focus_distance_mm\": 400.0", "\"sensor_distance_mm\": 40.0");
+    let near_sensor = tiny_scene(LENS, "").replace(
+        "\"focus_distance_mm\": 400.0",
+        "\"sensor_distance_mm\": 40.0",
+    );
     assert_fails_cleanly(&near_sensor, "must exceed the focal length");
     let odd_spp = tiny_scene(LENS, "").replace("\"spp\": 16", "\"spp\": 15");
     assert_fails_cleanly(&odd_spp, "perfect square");
@@ -128,7 +170,10 @@ fn tree_bytes(dir: &Path) -> Vec<(String, Vec<u8>)> {
             if p.is_dir() {
                 stack.push(p);
             } else {
-                out.push((p.strip_prefix(dir).unwrap().display().to_string(), std::fs::read(&p).unwrap()));
+                out.push((
+                    p.strip_prefix(dir).unwrap().display().to_string(),
+                    std::fs::read(&p).unwrap(),
+                ));
             }
         }
     }
@@ -141,7 +186,9 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let full = dir.path().join("full");
     let sharded = dir.path().join("sharded");
-    let common = ["--scenes", "3", "--seed", "7", "--size", "24", "--spp", "16", "-q"];
+    let common = [
+        "--scenes", "3", "--seed", "7", "--size", "24", "--spp", "16", "-q",
+    ];
     let run = |out: &Path, extra: &[&str]| {
         let mut args = vec!["benchmark", "make", "--out", out.to_str().unwrap()];
         args.extend_from_slice(&common);
@@ -152,19 +199,44 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
     run(&full, &["--threads", "1"]);
     run(&sharded, &["--shard", "1/2", "--threads", "2"]);
     assert!(sharded.join("scene_001").is_dir());
-    assert!(!sharded.join("scene_000").exists(), "shard 1/2 must not make scene 0");
+    assert!(
+        !sharded.join("scene_000").exists(),
+        "shard 1/2 must not make scene 0"
+    );
     run(&sharded, &["--shard", "0/2"]);
     let a = tree_bytes(&full);
-    assert_eq!(a.len(), 1 + 3 * 9, "{:?}", a.iter().map(|f| &f.0).collect::<Vec<_>>());
-    assert!(a == tree_bytes(&sharded), "sharded benchmark differs from the full run");
-    let manifest: serde_json::Value = serde_json::from_str(&String::from_utf8_lossy(&a[0].1)).unwrap();
+    assert_eq!(
+        a.len(),
+        1 + 3 * 9,
+        "{:?}",
+        a.iter().map(|f| &f.0).collect::<Vec<_>>()
+    );
+    assert!(
+        a == tree_bytes(&sharded),
+        "sharded benchmark differs from the full run"
+    );
+    let manifest: serde_json::Value =
+        serde_json::from_str(&String::from_utf8_lossy(&a[0].1)).unwrap();
     assert_eq!(manifest["entries"].as_array().unwrap().len(), 3);
     // Re-running skips finished scenes (their files are not rewritten).
-    let stamp = std::fs::metadata(full.join("scene_001/bokeh.png")).unwrap().modified().unwrap();
+    let stamp = std::fs::metadata(full.join("scene_001/bokeh.png"))
+        .unwrap()
+        .modified()
+        .unwrap();
     let mut args = vec!["benchmark", "make", "--out", full.to_str().unwrap()];
     args.extend_from_slice(&common[..common.len() - 1]);
     let o = drbokeh(&args);
     assert!(o.status.success());
-    assert!(stderr(&o).contains("0 scenes made, 3 already present"), "{}", stderr(&o));
-    assert_eq!(std::fs::metadata(full.join("scene_001/bokeh.png")).unwrap().modified().unwrap(), stamp);
+    assert!(
+        stderr(&o).contains("0 scenes made, 3 already present"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::metadata(full.join("scene_001/bokeh.png"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        stamp
+    );
 }

@@ -17,6 +17,7 @@
 pub mod aperture;
 pub mod camera;
 pub mod demo;
+pub mod dfd;
 pub mod engine;
 mod error;
 pub mod eval;

@@ -5,7 +5,7 @@
 //!   [`psnr_for_json`] / [`serialize_psnr`] when writing it to JSON.
 //! - [`ssim`]: scikit-image's `structural_similarity(gaussian_weights=True, sigma=1.5,
 //!   use_sample_covariance=False, data_range=1, channel_axis=-1)`, via the one SSIM
-//!   implementation in [`crate::loss::ssim`].
+//!   implementation in [`crate::loss::ssim`](mod@crate::loss::ssim).
 //! - [`ms_ssim`]: multi-scale SSIM (Wang, Simoncelli & Bovik 2003).
 //! - [`error_map`]: per-pixel absolute error, averaged over channels.
 

@@ -352,3 +352,52 @@ pub fn write_output<T: Real>(
         }
     }
 }
+
+/// Writes a one-channel map (e.g. disparity in [0, 1]): `.png` as 16-bit grey (clipped to
+/// [0, 1]), `.npy` as float32 (H, W), `.exr` as linear float (grey in all channels).
+pub fn write_grey<T: Real>(path: &Path, image: &Image<T>) -> Result<()> {
+    let (w, h) = (image.width as u32, image.height as u32);
+    let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
+    match extension(path).as_str() {
+        "png" => {
+            let data = image
+                .data
+                .iter()
+                .map(|v| (v.f64().clamp(0.0, 1.0) * 65535.0).round() as u16)
+                .collect();
+            let buf =
+                image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, data).unwrap();
+            write_atomic(path, |out| {
+                DynamicImage::ImageLuma16(buf)
+                    .write_to(out, ImageFormat::Png)
+                    .map_err(fail)
+            })
+        }
+        "npy" => {
+            use ndarray_npy::WriteNpyExt;
+            let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
+            let arr = ndarray::Array2::from_shape_vec((image.height, image.width), data).unwrap();
+            write_atomic(path, |out| {
+                arr.write_npy(out)
+                    .map_err(|e| Error::file(path, format!("write failed: {e}")))
+            })
+        }
+        "exr" => {
+            let data: Vec<f32> = image
+                .data
+                .iter()
+                .flat_map(|v| [v.f64() as f32; 3])
+                .collect();
+            let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
+            write_atomic(path, |out| {
+                DynamicImage::ImageRgb32F(buf)
+                    .write_to(out, ImageFormat::OpenExr)
+                    .map_err(fail)
+            })
+        }
+        e => Err(Error::file(
+            path,
+            format!("unsupported extension '.{e}' for a map (use .png, .npy or .exr)"),
+        )),
+    }
+}

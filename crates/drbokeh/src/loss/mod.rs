@@ -6,15 +6,15 @@
 //! together with its gradient (the vector-Jacobian product for an upstream gradient of 1)
 //! with respect to the optimised image, as an [`Image`] of the same shape.
 //!
-//! - [`l1`]: mean absolute difference ([`l1::l1`], [`l1::l1_grad`]).
+//! - [`l1`](mod@l1): mean absolute difference ([`l1::l1`], [`l1::l1_grad`]).
 //! - [`smoothness`]: edge-aware disparity smoothness over a 4-level pyramid.
-//! - [`ssim`]: Gaussian-window SSIM for any window, and the multi-window HSSIM.
+//! - [`ssim`](mod@ssim): Gaussian-window SSIM for any window, and the multi-window HSSIM.
 //! - [`pyramid`]: 2x2 average pooling and its adjoint, shared by the above and by
 //!   [`crate::eval::metrics`].
 //!
 //! All functions are generic over [`Real`](crate::Real) (`f32`, `f64`); sums are
 //! accumulated in `f64`. Inputs with mismatched shapes, or too small for a window or
-//! pyramid, are reported as [`Error`](crate::Error), never a panic.
+//! pyramid, are reported as [`Error`], never a panic.
 
 pub mod l1;
 pub mod pyramid;

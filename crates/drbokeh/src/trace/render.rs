@@ -14,13 +14,14 @@ use rayon::prelude::*;
 const PASS_DEFOCUS: u64 = 0xD3F0;
 const PASS_PINHOLE: u64 = 0x9141;
 
-/// Composites the billboards along a ray, front to back (premultiplied linear RGB).
+/// Composites the billboards along a ray, front to back (premultiplied linear RGB), each
+/// looked up at its mip level.
 #[inline]
-fn composite(scene: &Scene, ray: &Ray) -> [f32; 3] {
+fn composite(scene: &Scene, levels: &[usize], ray: &Ray) -> [f32; 3] {
     let mut acc = [0.0f32; 3];
     let mut transmit = 1.0f32;
-    for b in &scene.billboards {
-        let t = b.lookup(ray);
+    for (b, &level) in scene.billboards.iter().zip(levels) {
+        let t = b.lookup_level(ray, level);
         if t[3] > 0.0 || t[0] > 0.0 {
             for c in 0..3 {
                 acc[c] += transmit * t[c];
@@ -46,8 +47,10 @@ fn side(spp: usize, name: &str) -> Result<usize> {
 /// Renders the ground-truth defocused image in linear light (3 channels): each pixel
 /// averages `spp` rays (stratified over pixel area and over the aperture stop) through the
 /// lens. Rays the lens blocks (outside the rim, total internal reflection) are left out of
-/// the average, so vignetting does not darken the frame. Reports one progress unit per row
-/// (the caller calls `progress.start`).
+/// the average, so vignetting does not darken the frame. Each billboard is looked up at the
+/// mip level matching one pupil stratum's footprint ([`super::scene::Billboard::footprint_level`]):
+/// cheap shading, much less noise from fine texture under large blur. Reports one progress
+/// unit per row (the caller calls `progress.start`).
 pub fn render_defocus(
     scene: &Scene,
     spp: usize,
@@ -57,6 +60,11 @@ pub fn render_defocus(
     let n = side(spp, "render.spp")?;
     let o = &scene.optics;
     let (w, h) = (o.width_px, o.height_px);
+    let levels: Vec<usize> = scene
+        .billboards
+        .iter()
+        .map(|b| b.footprint_level(o, spp))
+        .collect();
     let rows: Vec<Vec<f32>> = (0..h)
         .into_par_iter()
         .map_init(
@@ -71,7 +79,7 @@ pub fn render_defocus(
                     for (p, q) in pix.iter().zip(pupil.iter()) {
                         let sensor = o.sensor_point(x as f64 + p.0, y as f64 + p.1);
                         if let Some(ray) = o.trace(sensor, *q) {
-                            let c = composite(scene, &ray);
+                            let c = composite(scene, &levels, &ray);
                             for k in 0..3 {
                                 sum[k] += c[k] as f64;
                             }

@@ -397,6 +397,8 @@ pub struct Billboard {
     pub y1_mm: f64,
     /// Content (premultiplied linear RGBA).
     pub texture: Arc<Texture>,
+    /// Its mip pyramid (level 0 = `texture`), for footprint-filtered lookups.
+    pub levels: Arc<Vec<Texture>>,
 }
 
 impl Billboard {
@@ -424,6 +426,7 @@ impl Billboard {
             x1_mm: x1,
             y0_mm: y0,
             y1_mm: y1,
+            levels: Arc::new(texture.clone().pyramid()),
             texture: Arc::new(texture),
         }
     }
@@ -431,12 +434,41 @@ impl Billboard {
     /// Premultiplied linear RGBA where the ray meets this billboard (transparent if it misses).
     #[inline]
     pub fn lookup(&self, ray: &super::optics::Ray) -> [f32; 4] {
+        self.lookup_level(ray, 0)
+    }
+
+    /// As [`Billboard::lookup`], from mip level `level` (0 = full resolution).
+    #[inline]
+    pub fn lookup_level(&self, ray: &super::optics::Ray, level: usize) -> [f32; 4] {
         match super::optics::hit_plane_z(ray, self.z_mm) {
-            Some((x, y)) => self.texture.sample(
+            Some((x, y)) => self.levels[level.min(self.levels.len() - 1)].sample(
                 (x - self.x0_mm) / (self.x1_mm - self.x0_mm),
                 (y - self.y0_mm) / (self.y1_mm - self.y0_mm),
             ),
             None => [0.0; 4],
+        }
+    }
+}
+
+impl Billboard {
+    /// The mip level whose texel matches the footprint of one pupil stratum on this
+    /// billboard when a pixel's `spp` rays are spread over the aperture: the cone of rays
+    /// from the stop (radius A) to the focus plane is `2 A |1 - z/z_f|` wide at depth z
+    /// (paraxially); one of `spp` strata covers `1/sqrt(spp)` of that width. The level is
+    /// rounded down (under-filtering), so in-focus billboards use full resolution and the
+    /// added blur is a fraction of a pixel next to the defocus blur it hides in.
+    pub fn footprint_level(&self, optics: &super::optics::Optics, spp: usize) -> usize {
+        let cone_mm = 2.0
+            * optics.aperture_radius_mm
+            * (1.0 - self.depth_mm / optics.focus_distance_mm()).abs();
+        let stratum_mm = cone_mm / (spp.max(1) as f64).sqrt();
+        let texel_mm = ((self.x1_mm - self.x0_mm) / self.texture.width as f64)
+            .max((self.y1_mm - self.y0_mm) / self.texture.height as f64);
+        let ratio = stratum_mm / texel_mm;
+        if ratio < 2.0 {
+            0
+        } else {
+            (ratio.log2().floor() as usize).min(self.levels.len() - 1)
         }
     }
 }

@@ -91,6 +91,46 @@ impl Texture {
         out
     }
 
+    /// The next coarser level of a mip pyramid: 2x2 box average (edge texels repeated for
+    /// odd sizes). Averaging premultiplied RGBA is the correct filter for compositing.
+    pub fn downsample(&self) -> Texture {
+        let (w, h) = (self.width.div_ceil(2), self.height.div_ceil(2));
+        let mut data = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = [0.0f32; 4];
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let sx = (2 * x + dx).min(self.width - 1);
+                    let sy = (2 * y + dy).min(self.height - 1);
+                    let t = self.data[sy * self.width + sx];
+                    for c in 0..4 {
+                        acc[c] += 0.25 * t[c];
+                    }
+                }
+                data.push(acc);
+            }
+        }
+        Texture {
+            width: w,
+            height: h,
+            data,
+        }
+    }
+
+    /// The mip pyramid of this texture: level 0 is the texture itself, each next level half
+    /// the size, down to 1x1.
+    pub fn pyramid(self) -> Vec<Texture> {
+        let mut levels = vec![self];
+        while let Some(last) = levels.last() {
+            if last.width == 1 && last.height == 1 {
+                break;
+            }
+            let next = last.downsample();
+            levels.push(next);
+        }
+        levels
+    }
+
     /// Loads an image file as a texture. PNG/JPEG/TIFF are display-encoded (gamma 2.2) and
     /// decoded to linear light; EXR is taken as linear. The file's alpha channel is used if
     /// it has one (else opaque); `alpha_path`, if given, supplies the alpha instead (a grey

@@ -1,0 +1,330 @@
+//! `drbokeh trace` (one user scene through a real lens) and `drbokeh benchmark make` (the
+//! standard ray-traced benchmark).
+
+use crate::progress::Bar;
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use drbokeh::trace::{self, benchmark, SceneSpec};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Path-trace a billboard scene through a thick spherical (or ideal thin) lens.
+///
+/// Writes into DIR: bokeh.png (16-bit) and bokeh.exr (linear) — the ground-truth defocused
+/// image; aif.png/aif.exr — the all-in-focus image through the chief ray; depth.npy (mm),
+/// disparity.npy and disparity.png; layers.npz — the layered ground truth as a drbokeh
+/// layer stack (front first); scene.json — every parameter, including the renderer's
+/// equivalent `blur` (K) and `focus`. The directory appears only once complete.
+///
+/// Example:
+///   drbokeh trace examples/scene.json --out out/example
+///   drbokeh render --layers out/example/layers.npz --blur K --focus F --output r.png
+#[derive(Args, Debug)]
+#[command(verbatim_doc_comment)]
+pub struct TraceArgs {
+    /// Scene file (JSON; see examples/scene.json and docs/ground-truth.md).
+    #[arg(value_name = "SCENE.json")]
+    pub scene: PathBuf,
+
+    /// Output directory (must not exist, unless --force).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// Samples per pixel (a perfect square); overrides the scene's render.spp.
+    #[arg(long, value_name = "N")]
+    pub spp: Option<usize>,
+
+    /// Sampling seed; overrides the scene's render.seed.
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+
+    /// Replace DIR if it exists (only after the new output is complete).
+    #[arg(long)]
+    pub force: bool,
+
+    /// Number of worker threads (default: all cores). Output does not depend on it.
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+
+    /// No progress bar or summary on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// The ray-traced benchmark.
+#[derive(Args, Debug)]
+pub struct BenchmarkArgs {
+    #[command(subcommand)]
+    pub command: BenchmarkCommand,
+}
+
+/// Benchmark subcommands.
+#[derive(Subcommand, Debug)]
+pub enum BenchmarkCommand {
+    /// Generate the seeded benchmark scenes (resumable, shardable).
+    Make(MakeArgs),
+}
+
+/// Generate the standard benchmark: procedural five-billboard scenes traced through a
+/// thick spherical lens, blur radii from 4 to 40 px (at 512 px), focus on near, middle
+/// and far billboards.
+///
+/// Each scene goes to DIR/scene_NNN (the same files as `drbokeh trace`); DIR/manifest.json
+/// lists every scene with its blur and focus. Scenes already present are skipped, so an
+/// interrupted run can be resumed; --shard k/n makes only scenes with index % n == k, so
+/// n machines can share the work (same seed, same bytes).
+///
+/// Example:
+///   drbokeh benchmark make --scenes 100 --seed 1 --size 512 --out bench
+#[derive(Args, Debug)]
+#[command(verbatim_doc_comment)]
+pub struct MakeArgs {
+    /// Number of scenes.
+    #[arg(long, default_value_t = 100, value_name = "N")]
+    pub scenes: usize,
+
+    /// Master seed: scene content and sampling follow from it.
+    #[arg(long, default_value_t = 0, value_name = "S")]
+    pub seed: u64,
+
+    /// Image width and height, pixels.
+    #[arg(long, default_value_t = 512, value_name = "PX")]
+    pub size: usize,
+
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// Samples per pixel of the defocused images (a perfect square).
+    #[arg(long, default_value_t = trace::scene::STANDARD_SPP, value_name = "N")]
+    pub spp: usize,
+
+    /// Make only the scenes with index % n == k.
+    #[arg(long, value_name = "k/n")]
+    pub shard: Option<String>,
+
+    /// Number of worker threads (default: all cores). Output does not depend on it.
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+
+    /// No progress bar or summary on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+fn init_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads {
+        if n == 0 || n > 1024 {
+            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot start the thread pool")?;
+    }
+    Ok(())
+}
+
+/// Traces one scene and writes its directory (replacing `out` only if `force`).
+fn trace_into(
+    spec: &SceneSpec,
+    base_dir: &Path,
+    out: &Path,
+    force: bool,
+    bar: &Bar,
+) -> Result<trace::Scene> {
+    let scene = spec.load(base_dir)?;
+    let outputs = trace::trace_scene(&scene, &spec.render, bar)?;
+    let mut record = spec.clone();
+    trace::absolutize_paths(&mut record, base_dir);
+    if force && out.exists() {
+        let name = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let staging = out.with_file_name(format!(".{name}.new-{}", std::process::id()));
+        trace::write_scene_dir(&staging, &record, &scene, &outputs)?;
+        std::fs::remove_dir_all(out).with_context(|| format!("cannot remove {}", out.display()))?;
+        std::fs::rename(&staging, out)
+            .with_context(|| format!("cannot move output to {}", out.display()))?;
+    } else {
+        trace::write_scene_dir(out, &record, &scene, &outputs)?;
+    }
+    Ok(scene)
+}
+
+/// `drbokeh trace`.
+pub fn run_trace(a: &TraceArgs) -> Result<()> {
+    init_threads(a.threads)?;
+    let mut spec = SceneSpec::read(&a.scene)?;
+    if let Some(spp) = a.spp {
+        spec.render.spp = spp;
+    }
+    if let Some(seed) = a.seed {
+        spec.render.seed = seed;
+    }
+    spec.validate().map_err(|e| e.in_file(&a.scene))?;
+    if a.out.exists() && !a.force {
+        bail!(
+            "{}: output directory already exists (use --force to replace it)",
+            a.out.display()
+        );
+    }
+    let base_dir = a.scene.parent().map(Path::to_path_buf).unwrap_or_default();
+    let base_dir = if base_dir.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        base_dir
+    };
+    let start = Instant::now();
+    let bar = Bar::new("tracing", a.quiet);
+    let scene = trace_into(&spec, &base_dir, &a.out, a.force, &bar);
+    bar.finish();
+    let scene = scene?;
+    if !a.quiet {
+        eprintln!(
+            "drbokeh: traced {}x{} at {} spp in {:.1} s -> {} (renderer equivalent: --blur {:.3} --focus {:.4})",
+            scene.optics.width_px,
+            scene.optics.height_px,
+            spec.render.spp,
+            start.elapsed().as_secs_f64(),
+            a.out.display(),
+            scene.blur_k_px(),
+            scene.focus_disparity()
+        );
+    }
+    Ok(())
+}
+
+fn parse_shard(s: &str) -> Result<(usize, usize)> {
+    let bad =
+        || anyhow::anyhow!("invalid parameter --shard: expected k/n with 0 <= k < n, got '{s}'");
+    let (k, n) = s.split_once('/').ok_or_else(bad)?;
+    let (k, n): (usize, usize) = (
+        k.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if n == 0 || k >= n {
+        return Err(bad());
+    }
+    Ok((k, n))
+}
+
+/// `drbokeh benchmark make`.
+pub fn run_benchmark(a: &BenchmarkArgs) -> Result<()> {
+    match &a.command {
+        BenchmarkCommand::Make(m) => run_make(m),
+    }
+}
+
+fn run_make(a: &MakeArgs) -> Result<()> {
+    init_threads(a.threads)?;
+    let (k, n) = match &a.shard {
+        Some(s) => parse_shard(s)?,
+        None => (0, 1),
+    };
+    if a.scenes == 0 || a.scenes > 100_000 {
+        bail!(
+            "invalid parameter --scenes: must be between 1 and 100000, got {}",
+            a.scenes
+        );
+    }
+    if !(8..=8192).contains(&a.size) {
+        bail!(
+            "invalid parameter --size: must be between 8 and 8192 pixels, got {}",
+            a.size
+        );
+    }
+    if trace::sampling::strata_side(a.spp).is_none() {
+        bail!(
+            "invalid parameter --spp: must be a perfect square (e.g. 256, 1024), got {}",
+            a.spp
+        );
+    }
+    let width = format!("{}", a.scenes - 1).len().max(3);
+    let dir_name = |i: usize| format!("scene_{i:0width$}");
+    // Every spec first: a bad parameter fails before anything is written.
+    let specs = (0..a.scenes)
+        .map(|i| benchmark::scene_spec(a.seed, i, a.scenes, a.size, a.spp))
+        .collect::<drbokeh::Result<Vec<_>>>()?;
+    for s in &specs {
+        s.validate()?;
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let entries = specs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| benchmark::manifest_entry(s, i, &dir_name(i)))
+        .collect::<drbokeh::Result<Vec<_>>>()?;
+    let manifest = serde_json::json!({
+        "benchmark": "drbokeh ray-traced ground truth",
+        "seed": a.seed,
+        "scenes": a.scenes,
+        "size": a.size,
+        "spp": a.spp,
+        "lens": {
+            "model": "spherical",
+            "curvature_radius_mm": benchmark::CURVATURE_RADIUS_MM,
+            "rim_radius_mm": benchmark::RIM_RADIUS_MM,
+            "eta": benchmark::ETA,
+        },
+        "fov_deg": benchmark::FOV_DEG,
+        "display_encoding": "gamma 2.2",
+        "entries": entries,
+    });
+    let manifest_path = a.out.join("manifest.json");
+    let text = serde_json::to_string_pretty(&manifest)? + "\n";
+    drbokeh::io::write_atomic(&manifest_path, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes())
+            .map_err(|e| drbokeh::Error::file(&manifest_path, format!("write failed: {e}")))
+    })?;
+    let mine: Vec<usize> = (0..a.scenes).filter(|i| i % n == k).collect();
+    let start = Instant::now();
+    let (mut made, mut skipped) = (0, 0);
+    for (done, &i) in mine.iter().enumerate() {
+        let dir = a.out.join(dir_name(i));
+        if dir.join("scene.json").is_file() {
+            skipped += 1;
+            continue;
+        }
+        let label = format!("{}/{} {}", done + 1, mine.len(), dir_name(i));
+        let bar = Bar::new(&label, a.quiet);
+        let t = Instant::now();
+        let result = trace_into(&specs[i], Path::new("."), &dir, dir.exists(), &bar);
+        bar.finish();
+        result.with_context(|| format!("scene {}", dir_name(i)))?;
+        made += 1;
+        if !a.quiet {
+            eprintln!(
+                "drbokeh: {} done in {:.1} s (max blur {:.1} px, focus {})",
+                dir_name(i),
+                t.elapsed().as_secs_f64(),
+                entries[i]["max_coc_radius_px"].as_f64().unwrap_or(0.0),
+                benchmark::focus_target(i)
+            );
+        }
+    }
+    if !a.quiet {
+        eprintln!(
+            "drbokeh: benchmark shard {k}/{n}: {made} scenes made, {skipped} already present, {:.1} s; manifest: {}",
+            start.elapsed().as_secs_f64(),
+            manifest_path.display()
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_shard;
+
+    #[test]
+    fn shard_parsing() {
+        assert_eq!(parse_shard("1/4").unwrap(), (1, 4));
+        assert!(parse_shard("4/4").is_err());
+        assert!(parse_shard("1-4").is_err());
+        assert!(parse_shard("0/0").is_err());
+    }
+}
