@@ -1,0 +1,109 @@
+//! `drbokeh dfd`: writes the disparity, its JSON loss log and a preview; rejects bad input.
+
+mod common;
+
+use common::{drbokeh, p, stderr};
+
+fn write_pair(dir: &std::path::Path, w: u32, h: u32) -> (std::path::PathBuf, std::path::PathBuf) {
+    let aif = image::RgbImage::from_fn(w, h, |x, y| {
+        image::Rgb([
+            ((x * 37 + y * 11) % 255) as u8,
+            ((x * 5 + y * 29) % 255) as u8,
+            90,
+        ])
+    });
+    let (a, b) = (dir.join("aif.png"), dir.join("blur.png"));
+    aif.save(&a).unwrap();
+    // A crude "defocused" version: a 3x3 box blur.
+    let blurred = image::imageops::blur(&aif, 1.5);
+    blurred.save(&b).unwrap();
+    (a, b)
+}
+
+#[test]
+fn dfd_writes_disparity_log_and_preview() {
+    let d = tempfile::tempdir().unwrap();
+    let (a, b) = write_pair(d.path(), 32, 32);
+    let out = d.path().join("disp.png");
+    let o = drbokeh(&[
+        "dfd",
+        "--all-in-focus",
+        p(&a),
+        "--defocused",
+        p(&b),
+        "--focus",
+        "1",
+        "--blur",
+        "4",
+        "--iterations",
+        "3",
+        "--layer",
+        "gausspsf",
+        "--losses",
+        "l1,smooth",
+        "--output",
+        p(&out),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let disp = image::open(&out).unwrap();
+    assert!(matches!(disp, image::DynamicImage::ImageLuma16(_)));
+    let log: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap();
+    assert_eq!(log["layer"], "gausspsf");
+    // 3 iterations at each of 2 scales.
+    assert_eq!(log["log"].as_array().unwrap().len(), 6);
+    assert!(log["log"][0]["l1"].as_f64().unwrap() > 0.0);
+    assert!(log["log"][0]["structure"].is_null());
+    assert!(d.path().join("disp.preview.png").exists());
+}
+
+#[test]
+fn dfd_rejects_bad_input() {
+    let d = tempfile::tempdir().unwrap();
+    let (a, _) = write_pair(d.path(), 32, 32);
+    let small = d.path().join("small.png");
+    image::RgbImage::new(31, 32).save(&small).unwrap();
+    let out = d.path().join("disp.png");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "dfd",
+            "--all-in-focus",
+            p(&a),
+            "--focus",
+            "1",
+            "--blur",
+            "4",
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        drbokeh(&args)
+    };
+    let o = run(&["--defocused", p(&small), "--output", p(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("small.png") && stderr(&o).contains("does not match"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&["--defocused", p(&a), "--losses", "l2", "--output", p(&out)]);
+    assert!(
+        stderr(&o).contains("unknown loss term 'l2'"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&["--defocused", p(&a), "--layer", "nope", "--output", p(&out)]);
+    assert!(stderr(&o).contains("unknown layer"), "{}", stderr(&o));
+    let o = run(&[
+        "--defocused",
+        p(&a),
+        "--output",
+        p(&d.path().join("disp.txt")),
+    ]);
+    assert!(
+        stderr(&o).contains("unsupported output extension"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists());
+}
