@@ -193,6 +193,21 @@ pub(crate) enum ApertureEval<T> {
 }
 
 impl<T: Real> ApertureEval<T> {
+    /// Distance beyond which a source of radius `r` contributes at most the soft step's
+    /// dropped tail ([`crate::model::SCATTER_TAIL_PX`]): the polygon lies inside the
+    /// circle (its gauge is at least the distance), and a kernel reaches the corner of its
+    /// square, `sqrt(2) r`, plus one texel of bilinear support.
+    pub(crate) fn reach_px(&self, radius_px: f64) -> f64 {
+        let tail = crate::model::SCATTER_TAIL_PX;
+        match self {
+            ApertureEval::Gauge => radius_px + tail,
+            ApertureEval::Kernel(k, _) => {
+                let texel = 2.0 / k.width.max(k.height) as f64;
+                (std::f64::consts::SQRT_2 * radius_px * (1.0 + texel) + 1.0).max(1.0 + tail)
+            }
+        }
+    }
+
     pub(crate) fn new(a: &Aperture) -> Self {
         match a {
             Aperture::Kernel(k) => ApertureEval::Kernel(k.clone(), std::marker::PhantomData),

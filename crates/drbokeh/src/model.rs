@@ -32,6 +32,18 @@ pub fn soft_step<T: Real>(r_minus_dist: T) -> T {
     T::one() / (T::one() + T::c(10.0) * (T::c(-3.0) * r_minus_dist).exp())
 }
 
+/// [`soft_step`] with [`Real::exp_fast`] (the fast engine's form; same formula).
+#[inline(always)]
+pub fn soft_step_fast<T: Real>(r_minus_dist: T) -> T {
+    T::one() / (T::one() + T::c(10.0) * (T::c(-3.0) * r_minus_dist).exp_fast())
+}
+
+/// How far beyond its radius a source's soft step is kept by the fast engine:
+/// `S(r - dist) <= 3.4e-10` for `dist >= r + 6.5`, so a receiver gathering at most `L^2`
+/// taps drops at most `L^2 * 3.4e-10 / r^2` of weight (1.7e-6 at L = 71), relative to a
+/// weight sum of order 1 wherever the layer has support.
+pub const SCATTER_TAIL_PX: f64 = 6.5;
+
 /// Derivative of [`soft_step`] with respect to `r - dist`, from its value: `3 S (1 - S)`.
 #[inline(always)]
 pub fn soft_step_derivative<T: Real>(s: T) -> T {
@@ -72,6 +84,14 @@ pub fn focus_weight_derivatives<T: Real>(blur_k: T, rel_disp_x: T, e: T) -> (T, 
 #[inline(always)]
 pub fn depth_step<T: Real>(disp_difference: T) -> T {
     T::c(0.5) + T::c(0.5) * (T::c(10.0) * (disp_difference - T::c(0.1))).tanh()
+}
+
+/// [`depth_step`] with `tanh(z) = 1 - 2 / (exp(2z) + 1)` through [`Real::exp_fast`].
+#[inline(always)]
+pub fn depth_step_fast<T: Real>(disp_difference: T) -> T {
+    let z = T::c(20.0) * (disp_difference - T::c(0.1));
+    // 1/2 + 1/2 tanh(z/2)... with z = 2 * 10 (D - 0.1): 1/2 + 1/2 (1 - 2/(e^z + 1)) = 1 - 1/(e^z + 1)
+    T::one() - T::one() / (z.exp_fast() + T::one())
 }
 
 /// Derivative of [`depth_step`]: `5 (1 - tanh^2(10 (D - 0.1)))`.
