@@ -38,6 +38,16 @@ pub struct SceneArgs {
     #[arg(long, value_name = "MATTE", requires = "image")]
     pub alpha: Option<PathBuf>,
 
+    /// With --image and no --alpha: render the image as one opaque layer instead of
+    /// decomposing it into depth layers at disparity discontinuities (the default).
+    #[arg(long, requires = "image", conflicts_with = "alpha")]
+    pub single_layer: bool,
+
+    /// With --image and no --alpha: the most depth layers the decomposition makes
+    /// (default 3; see `drbokeh layers`).
+    #[arg(long, value_name = "N", requires = "image", conflicts_with_all = ["alpha", "single_layer"])]
+    pub max_layers: Option<usize>,
+
     /// Render the built-in procedural demo scene (no files needed).
     #[arg(long)]
     pub demo: bool,
@@ -113,8 +123,11 @@ pub struct ExecArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
 
-    /// Execution engine: threaded (default) or reference (plain loops, the oracle; slow).
-    #[arg(long, default_value = "threaded", value_name = "ENGINE")]
+    /// Execution engine. auto (default): fast in f32, threaded with --f64 (bit-exact, for
+    /// checks). fast: skips taps that cannot contribute (agrees with the reference to ~1e-6
+    /// in linear light) and has no practical window limit. threaded: every window tap, all
+    /// cores. reference: plain loops, the oracle (slow).
+    #[arg(long, default_value = "auto", value_name = "ENGINE")]
     pub engine: String,
 
     /// No progress bar or notes on stderr.
@@ -123,6 +136,15 @@ pub struct ExecArgs {
 }
 
 impl ExecArgs {
+    /// The engine to use: `auto` resolves to fast in f32 and threaded in f64.
+    pub fn engine(&self) -> Result<drbokeh::Engine> {
+        Ok(match self.engine.as_str() {
+            "auto" if self.f64 => drbokeh::Engine::Threaded,
+            "auto" => drbokeh::Engine::Fast,
+            other => other.parse()?,
+        })
+    }
+
     /// Sets up the global thread pool.
     pub fn init_threads(&self) -> Result<()> {
         if let Some(n) = self.threads {
@@ -193,7 +215,16 @@ pub fn load_scene<T: Real>(a: &SceneArgs, gamma: f64, offset: f64) -> Result<Lay
     )?;
     check_same_size(image_path, &rgb, map_path, &disparity)?;
     match &a.alpha {
-        None => Ok(LayerStack::single(rgb, disparity)?),
+        None if a.single_layer => Ok(LayerStack::single(rgb, disparity)?),
+        None => {
+            let opts = drbokeh::layering::LayeringOptions {
+                max_layers: a
+                    .max_layers
+                    .unwrap_or(drbokeh::layering::DEFAULT_MAX_LAYERS),
+                ..Default::default()
+            };
+            Ok(drbokeh::layering::layers_from_disparity(&rgb, &disparity, &opts)?.stack)
+        }
         Some(matte_path) => {
             let matte = io::read_matte(matte_path)?;
             check_same_size(image_path, &rgb, matte_path, &matte)?;
@@ -230,6 +261,7 @@ pub fn settings_for<T: Real>(
     c: &CameraArgs,
     scene: &SceneArgs,
     stack: &LayerStack<T>,
+    engine: drbokeh::Engine,
 ) -> Result<(RenderSettings, Option<String>)> {
     let focus = match (c.focus, &c.focus_at) {
         (Some(f), _) => f,
@@ -267,10 +299,14 @@ pub fn settings_for<T: Real>(
                 Window::auto(1.0)
             } else {
                 let needed = c.blur_k.abs() * stack.max_defocus(focus) + 1.0;
-                let w = Window::auto(needed);
+                let w = if engine == drbokeh::Engine::Fast {
+                    Window::auto_unclipped(needed)
+                } else {
+                    Window::auto(needed)
+                };
                 if needed + drbokeh::camera::AUTO_WINDOW_MARGIN_PX > w.radius_px() as f64 + 0.5 {
                     note = Some(format!(
-                        "largest blur radius is {needed:.1} px but the automatic window is capped at L = {} (R = {}); pass --window {} for unclipped bokeh",
+                        "largest blur radius is {needed:.1} px but the automatic window is capped at L = {} (R = {}); pass --window {} (or use the fast engine) for unclipped bokeh",
                         w.size(),
                         w.radius_px(),
                         2 * (needed + drbokeh::camera::AUTO_WINDOW_MARGIN_PX).ceil() as usize + 1

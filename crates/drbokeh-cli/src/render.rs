@@ -57,9 +57,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
 }
 
 fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
-    let engine: Engine = a.exec.engine.parse()?;
+    let engine: Engine = a.exec.engine()?;
     let stack = load_scene::<T>(&a.scene, a.camera.gamma, a.camera.offset)?;
-    let (settings, note) = settings_for(&a.camera, &a.scene, &stack)?;
+    let (settings, note) = settings_for(&a.camera, &a.scene, &stack, engine)?;
     if let (Some(n), false) = (note, a.exec.quiet) {
         eprintln!("drbokeh: note: {n}");
     }

@@ -50,7 +50,7 @@ pub fn run(a: &VjpArgs) -> Result<()> {
             a.output.display()
         );
     }
-    if a.exec.engine != "threaded" {
+    if !matches!(a.exec.engine.as_str(), "auto" | "threaded") {
         bail!("invalid parameter --engine: vjp runs on the threaded engine only");
     }
     a.exec.init_threads()?;
@@ -63,7 +63,7 @@ pub fn run(a: &VjpArgs) -> Result<()> {
 
 fn run_typed<T: Real>(a: &VjpArgs) -> Result<()> {
     let stack = load_scene::<T>(&a.scene, a.camera.gamma, a.camera.offset)?;
-    let (settings, _) = settings_for(&a.camera, &a.scene, &stack)?;
+    let (settings, _) = settings_for(&a.camera, &a.scene, &stack, drbokeh::Engine::Threaded)?;
     let g = drbokeh::io::read_npy_image::<T>(&a.grad_output, 3, "output gradient")?;
     if g.width != stack.width || g.height != stack.height {
         bail!(

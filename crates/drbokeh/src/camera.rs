@@ -50,6 +50,15 @@ impl Window {
         }
     }
 
+    /// Like [`Window::auto`] but capped at [`MAX_WINDOW_SIZE`] instead: for engines whose
+    /// cost follows the actual blur radii (the fast engine), no clipping in practice.
+    pub fn auto_unclipped(max_radius_px: f64) -> Self {
+        let r = (max_radius_px + AUTO_WINDOW_MARGIN_PX).ceil().max(1.0) as usize;
+        Window {
+            radius_px: r.min(MAX_WINDOW_SIZE / 2),
+        }
+    }
+
     /// `R`, the half-size in pixels.
     pub fn radius_px(&self) -> usize {
         self.radius_px

@@ -15,6 +15,7 @@
 //! ```
 
 pub mod aperture;
+pub mod bench;
 pub mod camera;
 pub mod demo;
 pub mod dfd;
@@ -34,7 +35,7 @@ pub mod trace;
 pub use aperture::Aperture;
 pub use camera::{Camera, Window};
 pub use engine::adjoint::{render_with_tape, Gradients, LayerGradients, Tape};
-pub use engine::{render, Engine, NoProgress, Progress};
+pub use engine::{render, render_with_stats, Engine, NoProgress, Progress, RenderStats};
 pub use error::{Error, Result};
 pub use image::Image;
 pub use presets::{Preset, RenderSettings};

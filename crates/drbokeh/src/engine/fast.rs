@@ -1,11 +1,12 @@
 //! The fast engine: the same model, evaluated only where it matters.
 //!
-//! - **Bands**: output rows are processed in bands of [`BAND_ROWS`]; each band builds its
+//! - **Bands**: output rows are processed in bands of at least [`BAND_ROWS`] (and `2R`,
+//!   so padding stays at most half of a band's work); each band builds its
 //!   own reflection-padded planes (rows `y0 - R .. y1 + R`), so memory is bounded by the
 //!   band size, not the image (a 24-MP render never holds full-size padded planes).
 //! - **Tiles and reach**: a source of radius `r` reaches at most `r + 6.5` pixels
 //!   ([`model::SCATTER_TAIL_PX`]: beyond it `S <= 3.4e-10`). For each tile of
-//!   [`TILE`] columns x band, the largest radius among sources with alpha > 0 inside the
+//!   [`TILE`] x [`TILE_ROWS`] receivers, the largest radius among sources with alpha > 0 inside the
 //!   tile's window bounds the taps every receiver in it must visit; a tile whose window
 //!   holds no source skips the layer entirely. Cost grows with the actual blur radii, not
 //!   with `L^2`.
@@ -35,6 +36,10 @@ use rayon::prelude::*;
 pub const BAND_ROWS: usize = 32;
 /// Receiver columns per tile.
 pub const TILE: usize = 32;
+/// Receiver rows per tile.
+pub const TILE_ROWS: usize = 16;
+/// Rows per block of the per-column radius maxima.
+const ROW_BLOCK: usize = 8;
 /// Receivers with a focus weight below this treat the occlusion term as exactly 1.
 pub const FOCUS_WEIGHT_CUTOFF: f64 = 1e-9;
 
@@ -155,27 +160,31 @@ impl<T: Real> WindowTables<T> {
     }
 }
 
+/// Renders and counts the taps visited (source-receiver pairs evaluated).
 pub(super) fn render<T: Real>(
     stack: &LayerStack<T>,
     settings: &RenderSettings,
     progress: &dyn Progress,
-) -> Image<T> {
+) -> (Image<T>, u64) {
     let (w, h) = (stack.width, stack.height);
     let tables = WindowTables::<T>::new(settings);
+    let band_rows = BAND_ROWS.max(2 * tables.big_r);
     let aperture = ApertureEval::<T>::new(&settings.aperture);
     let (g, off) = (T::c(settings.camera.gamma), T::c(settings.camera.offset));
     let mut out = Image::new(w, h, 3);
-    out.data
-        .par_chunks_mut(3 * w * BAND_ROWS)
+    let taps: u64 = out
+        .data
+        .par_chunks_mut(3 * w * band_rows)
         .enumerate()
-        .for_each(|(band, chunk)| {
-            let y0 = band * BAND_ROWS;
-            let y1 = (y0 + BAND_ROWS).min(h);
+        .map(|(band, chunk)| {
+            let y0 = band * band_rows;
+            let y1 = (y0 + band_rows).min(h);
+            let mut taps = 0;
             let mut linear = vec![[T::zero(); 3]; (y1 - y0) * w];
             let mut transmittance = vec![T::one(); (y1 - y0) * w];
             for layer in &stack.layers {
                 let b = BandLayer::new(layer, settings, y0, y1, tables.big_r);
-                render_band_layer(
+                taps += render_band_layer_dispatch(
                     &b,
                     settings,
                     &tables,
@@ -191,11 +200,54 @@ pub(super) fn render<T: Real>(
                 }
             }
             progress.advance((y1 - y0) as u64);
-        });
-    out
+            taps
+        })
+        .sum();
+    (out, taps)
+}
+
+/// Calls [`render_band_layer`] compiled for AVX2 when the CPU has it (same arithmetic in
+/// the same order, so the same bytes; only the vector width differs), else for the
+/// baseline target.
+fn render_band_layer_dispatch<T: Real>(
+    b: &BandLayer<T>,
+    settings: &RenderSettings,
+    tables: &WindowTables<T>,
+    aperture: &ApertureEval<T>,
+    size: (usize, usize),
+    linear: &mut [[T; 3]],
+    transmittance: &mut [T],
+) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe {
+                render_band_layer_avx2(b, settings, tables, aperture, size, linear, transmittance)
+            };
+        }
+    }
+    render_band_layer(b, settings, tables, aperture, size, linear, transmittance)
+}
+
+/// [`render_band_layer`] compiled with AVX2 enabled.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn render_band_layer_avx2<T: Real>(
+    b: &BandLayer<T>,
+    settings: &RenderSettings,
+    tables: &WindowTables<T>,
+    aperture: &ApertureEval<T>,
+    size: (usize, usize),
+    linear: &mut [[T; 3]],
+    transmittance: &mut [T],
+) -> u64 {
+    render_band_layer(b, settings, tables, aperture, size, linear, transmittance)
 }
 
 /// Gathers one layer over a band and composites it into `linear` (front to back).
+/// Returns the number of taps visited.
+#[inline(always)]
 fn render_band_layer<T: Real>(
     b: &BandLayer<T>,
     settings: &RenderSettings,
@@ -204,29 +256,41 @@ fn render_band_layer<T: Real>(
     (rows, w): (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
-) {
+) -> u64 {
     let big_r = tables.big_r;
+    let mut taps = 0u64;
     let k = T::c(settings.camera.blur_k);
     let eps = T::c(model::WEIGHT_EPSILON);
     let cutoff = T::c(FOCUS_WEIGHT_CUTOFF);
-    // Per padded column, the largest radius among the band's sources with alpha > 0.
-    let mut column_max = vec![f64::NEG_INFINITY; b.stride];
+    // Per block of ROW_BLOCK padded rows and per padded column, the largest radius among
+    // sources with alpha > 0.
+    let blocks = b.rows.div_ceil(ROW_BLOCK);
+    let mut block_max = vec![f64::NEG_INFINITY; blocks * b.stride];
     for py in 0..b.rows {
-        for (px, m) in column_max.iter_mut().enumerate() {
+        let row = &mut block_max[(py / ROW_BLOCK) * b.stride..(py / ROW_BLOCK + 1) * b.stride];
+        for (px, m) in row.iter_mut().enumerate() {
             let i = py * b.stride + px;
             if b.alpha[i] > T::zero() {
                 *m = m.max(b.radius[i].f64());
             }
         }
     }
-    for tile_x0 in (0..w).step_by(TILE) {
+    for (tile_y0, tile_x0) in (0..rows)
+        .step_by(TILE_ROWS)
+        .flat_map(|ty| (0..w).step_by(TILE).map(move |tx| (ty, tx)))
+    {
         let tile_x1 = (tile_x0 + TILE).min(w);
+        let tile_y1 = (tile_y0 + TILE_ROWS).min(rows);
         // Largest radius among sources with alpha > 0 in the tile's window (padded coords:
-        // receiver column x sits at x + R; its window spans x .. x + 2R).
-        let max_r = column_max[tile_x0..tile_x1 + 2 * big_r]
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
+        // receiver (x, y) sits at (x + R, y + R); its window spans x .. x + 2R, y .. y + 2R).
+        let mut max_r = f64::NEG_INFINITY;
+        for block in tile_y0 / ROW_BLOCK..=(tile_y1 - 1 + 2 * big_r) / ROW_BLOCK {
+            let row = &block_max[block * b.stride..(block + 1) * b.stride];
+            max_r = row[tile_x0..tile_x1 + 2 * big_r]
+                .iter()
+                .copied()
+                .fold(max_r, f64::max);
+        }
         // Half-width of each tap row for this tile's reach (None: row unused).
         let widths: Vec<Option<usize>> = if max_r > f64::NEG_INFINITY {
             let reach = aperture.reach_px(max_r);
@@ -236,7 +300,7 @@ fn render_band_layer<T: Real>(
         } else {
             Vec::new()
         };
-        for y in 0..rows {
+        for y in tile_y0..tile_y1 {
             for x in tile_x0..tile_x1 {
                 let xi = (y + big_r) * b.stride + x + big_r;
                 let d_x = b.rel_disp[xi];
@@ -254,6 +318,7 @@ fn render_band_layer<T: Real>(
                         let lo = row - hw;
                         let g0 = big_r - hw;
                         let n = 2 * hw + 1;
+                        taps += n as u64;
                         let (sums, wsum) = match aperture {
                             ApertureEval::Gauge => {
                                 gather_run(b, lo, n, &gauge_row[g0..g0 + n], d_x, e_x, occluding)
@@ -321,6 +386,7 @@ fn render_band_layer<T: Real>(
             }
         }
     }
+    taps
 }
 
 /// Accumulator lanes of the gather run: independent partial sums that the compiler can
@@ -415,8 +481,19 @@ fn gather_run_lanes<T: Real, const OCCLUDING: bool>(
             &b.green[s0..s0 + m],
             &b.blue[s0..s0 + m],
         );
-        for i in 0..m {
-            let l = i % LANES;
+        // Lane l sums the taps i with i % LANES == l (CHUNK is a multiple of LANES).
+        let full = m / LANES * LANES;
+        for base in (0..full).step_by(LANES) {
+            for l in 0..LANES {
+                let i = base + l;
+                lr[l] = lr[l] + c[i] * red[i];
+                lg[l] = lg[l] + c[i] * green[i];
+                lb[l] = lb[l] + c[i] * blue[i];
+                lw[l] = lw[l] + c[i];
+            }
+        }
+        for i in full..m {
+            let l = i - full;
             lr[l] = lr[l] + c[i] * red[i];
             lg[l] = lg[l] + c[i] * green[i];
             lb[l] = lb[l] + c[i] * blue[i];

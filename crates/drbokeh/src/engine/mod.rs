@@ -51,6 +51,15 @@ pub trait Progress: Sync {
 pub struct NoProgress;
 impl Progress for NoProgress {}
 
+/// Counters of one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RenderStats {
+    /// Source-receiver pairs visited: every masked window tap of every pixel and layer for
+    /// the reference and threaded engines, the taps inside each tile's reach for the fast
+    /// engine.
+    pub taps: u64,
+}
+
 /// Renders a layer stack: returns the display-encoded RGB image (3 channels).
 pub fn render<T: Real>(
     stack: &LayerStack<T>,
@@ -58,12 +67,40 @@ pub fn render<T: Real>(
     engine: Engine,
     progress: &dyn Progress,
 ) -> Result<Image<T>> {
+    Ok(render_with_stats(stack, settings, engine, progress)?.0)
+}
+
+/// [`render`], also returning [`RenderStats`].
+pub fn render_with_stats<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    engine: Engine,
+    progress: &dyn Progress,
+) -> Result<(Image<T>, RenderStats)> {
     stack.validate()?;
     settings.validate()?;
     progress.start(stack.height as u64);
+    let window_taps = || {
+        let per_pixel =
+            crate::model::window_taps(settings.camera.window.radius_px(), &settings.aperture).len();
+        (per_pixel * stack.width * stack.height * stack.layers.len()) as u64
+    };
     Ok(match engine {
-        Engine::Reference => reference::render(stack, settings, progress),
-        Engine::Threaded => threaded::render(stack, settings, progress),
-        Engine::Fast => fast::render(stack, settings, progress),
+        Engine::Reference => (
+            reference::render(stack, settings, progress),
+            RenderStats {
+                taps: window_taps(),
+            },
+        ),
+        Engine::Threaded => (
+            threaded::render(stack, settings, progress),
+            RenderStats {
+                taps: window_taps(),
+            },
+        ),
+        Engine::Fast => {
+            let (img, taps) = fast::render(stack, settings, progress);
+            (img, RenderStats { taps })
+        }
     })
 }

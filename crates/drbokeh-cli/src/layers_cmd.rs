@@ -1,0 +1,234 @@
+//! `drbokeh layers`: from a photo (image + disparity, optional matte) to a layer stack.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use drbokeh::io::{self, BitDepth, DepthKind, DisparityOptions};
+use drbokeh::layering::{self, LayeringOptions};
+use drbokeh::{Image, LayerStack};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Decompose a photo into a layer stack (no learned model, no downloads).
+///
+/// With --alpha: the paper's two layers (foreground = matte; background inpainted under
+/// it). Without: up to --max-layers depth layers cut at disparity discontinuities, each
+/// layer's hidden part inpainted (colour by fast marching, disparity by a smooth fill from
+/// the far side). Writes STACK.npz (input to `drbokeh render --layers`) and, unless
+/// --no-preview, STACK.layerK.png (colour over a checkerboard by alpha) and
+/// STACK.layerK.disparity.png for every layer K (0 = front). See docs/layering.md.
+///
+/// Examples:
+///   drbokeh layers --image photo.jpg --disparity disp.png --output stack.npz
+///   drbokeh layers --image photo.jpg --depth depth.exr --alpha matte.png --output stack.npz
+///   drbokeh render --layers stack.npz --focus-at 320,200 --output out.png
+#[derive(Args, Debug)]
+#[command(verbatim_doc_comment)]
+pub struct LayersArgs {
+    /// All-in-focus image (PNG 8/16-bit, JPEG, TIFF, or linear EXR).
+    #[arg(long, value_name = "IMAGE")]
+    pub image: PathBuf,
+
+    /// Disparity map (larger = nearer): 16-bit PNG, EXR, NPY, or NPZ key `data`.
+    #[arg(long, value_name = "MAP", conflicts_with = "depth")]
+    pub disparity: Option<PathBuf>,
+
+    /// Metric depth map (larger = farther); converted to disparity 1/z.
+    #[arg(long, value_name = "MAP")]
+    pub depth: Option<PathBuf>,
+
+    /// Keep the map's values instead of min-max normalising disparity to [0, 1].
+    #[arg(long)]
+    pub no_normalize: bool,
+
+    /// Alpha matte (grey image, or the alpha of an RGBA PNG): two layers from the matte.
+    #[arg(long, value_name = "MATTE")]
+    pub alpha: Option<PathBuf>,
+
+    /// Most layers to make without a matte (1 to 16).
+    #[arg(long, value_name = "N", default_value_t = layering::DEFAULT_MAX_LAYERS)]
+    pub max_layers: usize,
+
+    /// Discontinuity threshold: a neighbour step in disparity larger than this fraction of
+    /// the map's range may separate layers.
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.05)]
+    pub jump: f64,
+
+    /// How far (pixels) a middle layer is filled in behind nearer ones (default: 5 % of
+    /// the larger image side, at least 16). The back layer is always filled entirely.
+    #[arg(long, value_name = "PX")]
+    pub band: Option<f64>,
+
+    /// Output layer stack (.npz). Written only once complete.
+    #[arg(long, short, value_name = "STACK.npz")]
+    pub output: PathBuf,
+
+    /// Do not write the preview PNGs.
+    #[arg(long)]
+    pub no_preview: bool,
+
+    /// Number of worker threads (default: all cores). Output does not depend on it.
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+
+    /// No notes on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+pub fn run(a: &LayersArgs) -> Result<()> {
+    if !a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("npz"))
+    {
+        bail!(
+            "{}: the layer stack is written as NPZ: use a .npz output name",
+            a.output.display()
+        );
+    }
+    let opts = LayeringOptions {
+        max_layers: a.max_layers,
+        jump_fraction: a.jump,
+        occlusion_band_px: a.band,
+        ..LayeringOptions::default()
+    };
+    opts.validate()?;
+    if let Some(n) = a.threads {
+        if n == 0 || n > 1024 {
+            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot start the thread pool")?;
+    }
+    let (map_path, kind) = match (&a.disparity, &a.depth) {
+        (Some(p), None) => (p, DepthKind::Disparity),
+        (None, Some(p)) => (p, DepthKind::Depth),
+        _ => bail!(
+            "drbokeh layers needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"
+        ),
+    };
+    let mut rgb: Image<f32> = io::read_rgb(&a.image)?;
+    if a.image
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        // Linear EXR colour: display-encode with the default transfer (gamma 2.2).
+        for v in rgb.data.iter_mut() {
+            *v = drbokeh::model::encode(*v as f64, 2.2, 0.0).max(0.0) as f32;
+        }
+    }
+    let disparity: Image<f32> = io::read_disparity(
+        map_path,
+        DisparityOptions {
+            kind,
+            normalize: !a.no_normalize,
+        },
+    )?;
+    check_same_size(&a.image, &rgb, map_path, &disparity)?;
+    let matte: Option<Image<f32>> = match &a.alpha {
+        Some(p) => {
+            let m = io::read_matte(p)?;
+            check_same_size(&a.image, &rgb, p, &m)?;
+            Some(m)
+        }
+        None => None,
+    };
+    let t0 = Instant::now();
+    let d = layering::decompose(&rgb, &disparity, matte.as_ref(), &opts)?;
+    let elapsed = t0.elapsed().as_secs_f64();
+    io::write_stack(&a.output, &d.stack)?;
+    if !a.no_preview {
+        write_previews(&a.output, &d.stack)?;
+    }
+    if !a.quiet {
+        for n in &d.notes {
+            eprintln!("drbokeh: note: {n}");
+        }
+        let cuts = if d.thresholds.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", cut at disparity {}",
+                d.thresholds
+                    .iter()
+                    .map(|t| format!("{t:.3}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        eprintln!(
+            "drbokeh: {} layer(s){cuts} for {}x{} in {elapsed:.2} s -> {}",
+            d.stack.layers.len(),
+            d.stack.width,
+            d.stack.height,
+            a.output.display()
+        );
+    }
+    Ok(())
+}
+
+/// `dir/name.npz` -> `dir/name.SUFFIX`.
+fn sibling(output: &Path, suffix: &str) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "stack".into());
+    output.with_file_name(format!("{stem}.{suffix}"))
+}
+
+/// Per layer: colour over a checkerboard by alpha, and disparity (rescaled to the stack's
+/// disparity range) as 16-bit grey.
+fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
+    let (w, h) = (stack.width, stack.height);
+    let (lo, hi) = stack
+        .layers
+        .iter()
+        .flat_map(|l| l.disparity.data.iter())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    for (k, l) in stack.layers.iter().enumerate() {
+        let mut over = Image::<f32>::new(w, h, 3);
+        for y in 0..h {
+            for x in 0..w {
+                let a = l.alpha.at(x, y, 0);
+                let checker = if (x / 8 + y / 8) % 2 == 0 { 0.8 } else { 0.55 };
+                for c in 0..3 {
+                    *over.at_mut(x, y, c) = a * l.rgb_encoded.at(x, y, c) + (1.0 - a) * checker;
+                }
+            }
+        }
+        io::write_output(
+            &sibling(output, &format!("layer{k}.png")),
+            &over,
+            BitDepth::Eight,
+            |v| v,
+        )?;
+        let disp = Image::from_vec(
+            w,
+            h,
+            1,
+            l.disparity.data.iter().map(|&d| (d - lo) / span).collect(),
+        )?;
+        io::write_grey(&sibling(output, &format!("layer{k}.disparity.png")), &disp)?;
+    }
+    Ok(())
+}
+
+fn check_same_size<A, B>(a_path: &Path, a: &Image<A>, b_path: &Path, b: &Image<B>) -> Result<()> {
+    if a.width != b.width || a.height != b.height {
+        bail!(
+            "{}: size {}x{} does not match {} ({}x{})",
+            b_path.display(),
+            b.width,
+            b.height,
+            a_path.display(),
+            a.width,
+            a.height
+        );
+    }
+    Ok(())
+}

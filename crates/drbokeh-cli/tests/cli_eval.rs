@@ -1,0 +1,184 @@
+//! CLI tests of `drbokeh eval` and `drbokeh gallery` on a tiny generated benchmark.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn drbokeh(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_drbokeh"))
+        .args(args)
+        .output()
+        .expect("cannot run drbokeh")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn make_bench(dir: &Path) {
+    let o = drbokeh(&[
+        "benchmark",
+        "make",
+        "--scenes",
+        "2",
+        "--size",
+        "64",
+        "--spp",
+        "16",
+        "--quiet",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn eval_and_gallery_write_their_reports() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bench = tmp.path().join("bench");
+    make_bench(&bench);
+    let out = tmp.path().join("report");
+    let o = drbokeh(&[
+        "eval",
+        "--benchmark",
+        bench.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--methods",
+        "gather,paper-gt",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "results.json",
+        "results.csv",
+        "summary.md",
+        "index.html",
+        "psnr_vs_blur.svg",
+        "ssim_vs_blur.svg",
+        "ms_ssim_vs_blur.svg",
+        "scenes/scene_000/gt.jpg",
+        "scenes/scene_001/paper-gt.err.png",
+    ] {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 2 * 2, "{csv}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(json["methods"].as_array().unwrap().len(), 2);
+    assert_eq!(json["scenes"][1]["results"][1]["method"], "paper-gt");
+
+    // Gallery from pairs named NAME.png + NAME.disp.png (one image without a partner).
+    let imgs = tmp.path().join("imgs");
+    std::fs::create_dir(&imgs).unwrap();
+    std::fs::copy(bench.join("scene_000/aif.png"), imgs.join("a.png")).unwrap();
+    std::fs::copy(
+        bench.join("scene_000/disparity.png"),
+        imgs.join("a.disp.png"),
+    )
+    .unwrap();
+    std::fs::copy(bench.join("scene_001/aif.png"), imgs.join("lonely.png")).unwrap();
+    let gal = tmp.path().join("gallery");
+    let o = drbokeh(&[
+        "gallery",
+        "--images",
+        imgs.to_str().unwrap(),
+        "--focal-planes",
+        "3",
+        "--blur",
+        "8",
+        "--out",
+        gal.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("lonely.png"), "{}", stderr(&o));
+    let html = std::fs::read_to_string(gal.join("index.html")).unwrap();
+    let srcs: Vec<&str> = html
+        .split("src=\"")
+        .skip(1)
+        .map(|s| s.split('"').next().unwrap())
+        .collect();
+    assert_eq!(srcs.len(), 2 + 3 * 5, "{html}");
+    for s in srcs {
+        assert!(gal.join(s).is_file(), "missing {s}");
+    }
+}
+
+#[test]
+fn bad_inputs_fail_with_clear_messages() {
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("nope");
+    let out = tmp.path().join("out");
+    let o = drbokeh(&[
+        "eval",
+        "--benchmark",
+        missing.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("does not exist"), "{}", stderr(&o));
+    assert!(!out.exists(), "no output for a failed run");
+
+    // A scene directory without its images.
+    let bench = tmp.path().join("bench");
+    std::fs::create_dir_all(bench.join("scene_000")).unwrap();
+    std::fs::write(
+        bench.join("scene_000/scene.json"),
+        r#"{"blur": 5.0, "focus": 0.5}"#,
+    )
+    .unwrap();
+    let o = drbokeh(&[
+        "eval",
+        "--benchmark",
+        bench.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("aif.png") && stderr(&o).contains("missing"),
+        "{}",
+        stderr(&o)
+    );
+
+    let o = drbokeh(&[
+        "eval",
+        "--benchmark",
+        bench.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--methods",
+        "gather,magic",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("unknown method 'magic'"),
+        "{}",
+        stderr(&o)
+    );
+
+    let o = drbokeh(&[
+        "gallery",
+        "--images",
+        missing.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("does not exist"), "{}", stderr(&o));
+    let o = drbokeh(&[
+        "gallery",
+        "--images",
+        bench.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("no image + disparity pairs"),
+        "{}",
+        stderr(&o)
+    );
+}
