@@ -147,17 +147,22 @@ impl ExecArgs {
 
     /// Sets up the global thread pool.
     pub fn init_threads(&self) -> Result<()> {
-        if let Some(n) = self.threads {
-            if n == 0 || n > 1024 {
-                bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
-            }
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build_global()
-                .context("cannot start the thread pool")?;
-        }
-        Ok(())
+        init_threads(self.threads)
     }
+}
+
+/// Sets up the global thread pool with `threads` workers (all cores when `None`).
+pub fn init_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads {
+        if n == 0 || n > 1024 {
+            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot start the thread pool")?;
+    }
+    Ok(())
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
@@ -235,7 +240,8 @@ pub fn load_scene<T: Real>(a: &SceneArgs, gamma: f64, offset: f64) -> Result<Lay
     }
 }
 
-fn check_same_size<A, B>(
+/// Fails unless two images (read from the named files) have the same size.
+pub fn check_same_size<A, B>(
     a_path: &Path,
     a: &drbokeh::Image<A>,
     b_path: &Path,

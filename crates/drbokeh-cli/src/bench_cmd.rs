@@ -52,15 +52,7 @@ fn print_row(r: &BenchRow) {
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
-    if let Some(n) = a.threads {
-        anyhow::ensure!(
-            (1..=1024).contains(&n),
-            "invalid parameter --threads: must be between 1 and 1024"
-        );
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()?;
-    }
+    crate::args::init_threads(a.threads)?;
     println!("threads: {}", rayon::current_num_threads());
     println!("| workload | MP | layers | K | L | engine | seconds | taps | taps/s | speed-up vs threaded | max diff (linear) | disc area |");
     println!("| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |");

@@ -126,11 +126,11 @@ pub fn run(a: &LayersArgs) -> Result<()> {
             normalize: !a.no_normalize,
         },
     )?;
-    check_same_size(&a.image, &rgb, map_path, &disparity)?;
+    crate::args::check_same_size(&a.image, &rgb, map_path, &disparity)?;
     let matte: Option<Image<f32>> = match &a.alpha {
         Some(p) => {
             let m = io::read_matte(p)?;
-            check_same_size(&a.image, &rgb, p, &m)?;
+            crate::args::check_same_size(&a.image, &rgb, p, &m)?;
             Some(m)
         }
         None => None,
@@ -214,21 +214,6 @@ fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
             l.disparity.data.iter().map(|&d| (d - lo) / span).collect(),
         )?;
         io::write_grey(&sibling(output, &format!("layer{k}.disparity.png")), &disp)?;
-    }
-    Ok(())
-}
-
-fn check_same_size<A, B>(a_path: &Path, a: &Image<A>, b_path: &Path, b: &Image<B>) -> Result<()> {
-    if a.width != b.width || a.height != b.height {
-        bail!(
-            "{}: size {}x{} does not match {} ({}x{})",
-            b_path.display(),
-            b.width,
-            b.height,
-            a_path.display(),
-            a.width,
-            a.height
-        );
     }
     Ok(())
 }

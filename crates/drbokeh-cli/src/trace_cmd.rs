@@ -112,19 +112,6 @@ pub struct MakeArgs {
     pub quiet: bool,
 }
 
-fn init_threads(threads: Option<usize>) -> Result<()> {
-    if let Some(n) = threads {
-        if n == 0 || n > 1024 {
-            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("cannot start the thread pool")?;
-    }
-    Ok(())
-}
-
 /// Traces one scene and writes its directory (replacing `out` only if `force`).
 fn trace_into(
     spec: &SceneSpec,
@@ -155,7 +142,7 @@ fn trace_into(
 
 /// `drbokeh trace`.
 pub fn run_trace(a: &TraceArgs) -> Result<()> {
-    init_threads(a.threads)?;
+    crate::args::init_threads(a.threads)?;
     let mut spec = SceneSpec::read(&a.scene)?;
     if let Some(spp) = a.spp {
         spec.render.spp = spp;
@@ -218,7 +205,7 @@ pub fn run_benchmark(a: &BenchmarkArgs) -> Result<()> {
 }
 
 fn run_make(a: &MakeArgs) -> Result<()> {
-    init_threads(a.threads)?;
+    crate::args::init_threads(a.threads)?;
     let (k, n) = match &a.shard {
         Some(s) => parse_shard(s)?,
         None => (0, 1),
