@@ -102,22 +102,9 @@ pub struct GalleryArgs {
     pub quiet: bool,
 }
 
-fn init_threads(threads: Option<usize>) -> Result<()> {
-    if let Some(n) = threads {
-        if n == 0 || n > 1024 {
-            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("cannot start the thread pool")?;
-    }
-    Ok(())
-}
-
 /// `drbokeh eval`.
 pub fn run_eval(a: &EvalArgs) -> Result<()> {
-    init_threads(a.threads)?;
+    crate::args::init_threads(a.threads)?;
     let methods = Method::parse_list(&a.methods)?;
     if a.limit == Some(0) {
         bail!("invalid parameter --limit: must be at least 1");
@@ -168,7 +155,7 @@ fn summary_lines(rep: &report::Report) -> String {
 
 /// `drbokeh gallery`.
 pub fn run_gallery(a: &GalleryArgs) -> Result<()> {
-    init_threads(a.threads)?;
+    crate::args::init_threads(a.threads)?;
     let methods = Method::parse_list(&a.methods)?;
     let methods: Vec<Method> = if a.methods.split(',').any(|m| m.trim() == "all") {
         gallery::gallery_methods()

@@ -13,11 +13,12 @@
 //! covers), so a disc of radius `rho` already has its edge at `rho`. A disc never gets
 //! smaller than [`MIN_DISC_RADIUS_PX`] (one pixel: an in-focus pixel maps onto itself).
 //!
-//! **The anti-aliased disc.** Row `dy` of a disc of radius `rho` is the segment
-//! `|dx| <= h = sqrt(rho^2 - dy^2)`; each pixel column gets the length of the segment
-//! inside it (full pixels 1, the two end pixels a fraction), so the kernel's weight is
-//! continuous in `rho` and its area is `sum_dy 2 h(dy) ~ pi rho^2`. Rows of the disc are
-//! summed with prefix sums, so a disc costs `O(rho)` per pixel, not `O(rho^2)`.
+//! **The anti-aliased disc.** Each pixel row of a disc of radius `rho` is sampled at four
+//! sub-rows `t`; a sub-row is the chord `|dx| <= h = sqrt(rho^2 - t^2)`, and each pixel
+//! column gets the length of the chord inside it (full pixels 1, the two end pixels a
+//! fraction). So the kernel is round even for small radii, its weight is continuous in
+//! `rho`, and its area is close to `pi rho^2`. Chords are summed with per-row prefix sums,
+//! so a disc costs `O(rho)` per pixel, not `O(rho^2)`.
 //!
 //! **Borders.** Sums run over in-image pixels only and are normalised by the in-image
 //! weight (no padding), as in [`crate::dfd::layers`].
@@ -167,33 +168,65 @@ pub fn coc_radius_px(camera: &Camera, disparity: f64) -> f64 {
     (camera.blur_k * (disparity - camera.focus_disparity).abs()).max(MIN_DISC_RADIUS_PX)
 }
 
-/// Row `dy` of the anti-aliased disc of radius `rho`: `(full, edge_weight)`, meaning
-/// columns `|dx| <= full` have weight 1 and columns `|dx| = full + 1` have `edge_weight`
-/// (in `[0, 1)`); `None` if the row misses the disc. The row's weight is `2 sqrt(rho^2 -
-/// dy^2)`, the segment's length. (A row shorter than a pixel puts all of it on `dx = 0`.)
+/// Sub-rows per pixel row when the disc is area-sampled vertically.
+const SUB_ROWS: usize = 4;
+
+/// One horizontal run of the disc within a pixel row: columns `|dx| <= full` weigh
+/// `inner`, columns `|dx| = full + 1` weigh `edge`.
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    full: isize,
+    inner: f64,
+    edge: f64,
+}
+
+/// Pixel row `dy` of the anti-aliased disc of radius `rho`, as [`SUB_ROWS`] runs (one per
+/// sub-row, each weighted `1 / SUB_ROWS`): sub-row `t` is the chord `|dx| <= h =
+/// sqrt(rho^2 - t^2)`, and each pixel column gets the length of the chord inside it (a chord
+/// shorter than a pixel puts all of it on `dx = 0`). Sub-rows outside the disc weigh 0.
 #[inline]
-fn disc_row(rho: f64, dy: isize) -> Option<(isize, f64, f64)> {
-    let dy = dy as f64;
-    let h2 = rho * rho - dy * dy;
-    if h2 <= 0.0 {
-        return None;
-    }
-    let h = h2.sqrt();
-    let f = h - 0.5;
-    if f < 0.0 {
-        // Centre pixel only, weight 2h < 1.
-        return Some((0, 2.0 * h, 0.0));
-    }
-    let full = f.floor();
-    Some((full as isize, 1.0, f - full))
+fn disc_row(rho: f64, dy: isize) -> [Run; SUB_ROWS] {
+    let sub = SUB_ROWS as f64;
+    std::array::from_fn(|k| {
+        let t = dy as f64 + (k as f64 + 0.5) / sub - 0.5;
+        let h2 = rho * rho - t * t;
+        if h2 <= 0.0 {
+            return Run {
+                full: 0,
+                inner: 0.0,
+                edge: 0.0,
+            };
+        }
+        let h = h2.sqrt();
+        let f = h - 0.5;
+        if f < 0.0 {
+            return Run {
+                full: 0,
+                inner: 2.0 * h / sub,
+                edge: 0.0,
+            };
+        }
+        let full = f.floor();
+        Run {
+            full: full as isize,
+            inner: 1.0 / sub,
+            edge: (f - full) / sub,
+        }
+    })
+}
+
+/// Rows `-n..=n` reached by the disc of radius `rho`.
+#[inline]
+fn disc_rows(rho: f64) -> isize {
+    (rho + 0.5).ceil() as isize
 }
 
 /// The total weight (area) of the anti-aliased disc of radius `rho`.
 fn disc_area(rho: f64) -> f64 {
-    let n = rho.ceil() as isize;
+    let n = disc_rows(rho);
     (-n..=n)
-        .filter_map(|dy| disc_row(rho, dy))
-        .map(|(full, centre, edge)| centre + 2.0 * full as f64 + 2.0 * edge)
+        .flat_map(|dy| disc_row(rho, dy))
+        .map(|r| r.inner * (2 * r.full + 1) as f64 + 2.0 * r.edge)
         .sum()
 }
 
@@ -229,7 +262,7 @@ fn disc_gather(
         let mut acc = vec![0.0f64; ch];
         for x in 0..w {
             let rho = radius(y * w + x);
-            let n = rho.ceil() as isize;
+            let n = disc_rows(rho);
             acc.iter_mut().for_each(|a| *a = 0.0);
             let mut wsum = 0.0f64;
             for dy in -n..=n {
@@ -237,31 +270,27 @@ fn disc_gather(
                 if sy < 0 || sy >= h as isize {
                     continue;
                 }
-                let Some((full, centre, edge)) = disc_row(rho, dy) else {
-                    continue;
-                };
                 let sy = sy as usize;
                 let base = sy * (w + 1) * ch;
-                if full == 0 && centre < 1.0 {
-                    for c in 0..ch {
-                        acc[c] += centre * data[(sy * w + x) * ch + c] as f64;
+                for run in disc_row(rho, dy) {
+                    if run.inner <= 0.0 {
+                        continue;
                     }
-                    wsum += centre;
-                    continue;
-                }
-                let lo = (x as isize - full).max(0) as usize;
-                let hi = (x as isize + full).min(w as isize - 1) as usize;
-                for c in 0..ch {
-                    acc[c] += p[base + (hi + 1) * ch + c] - p[base + lo * ch + c];
-                }
-                wsum += (hi + 1 - lo) as f64;
-                if edge > 0.0 {
-                    for sx in [x as isize - full - 1, x as isize + full + 1] {
-                        if sx >= 0 && sx < w as isize {
-                            for c in 0..ch {
-                                acc[c] += edge * data[(sy * w + sx as usize) * ch + c] as f64;
+                    let lo = (x as isize - run.full).max(0) as usize;
+                    let hi = (x as isize + run.full).min(w as isize - 1) as usize;
+                    for c in 0..ch {
+                        acc[c] += run.inner * (p[base + (hi + 1) * ch + c] - p[base + lo * ch + c]);
+                    }
+                    wsum += run.inner * (hi + 1 - lo) as f64;
+                    if run.edge > 0.0 {
+                        for sx in [x as isize - run.full - 1, x as isize + run.full + 1] {
+                            if sx >= 0 && sx < w as isize {
+                                for c in 0..ch {
+                                    acc[c] +=
+                                        run.edge * data[(sy * w + sx as usize) * ch + c] as f64;
+                                }
+                                wsum += run.edge;
                             }
-                            wsum += edge;
                         }
                     }
                 }
@@ -355,7 +384,7 @@ pub fn naive_scatter<T: Real>(
             a
         })
         .collect();
-    let rmax = radii.iter().cloned().fold(0.0, f64::max).ceil() as isize;
+    let rmax = disc_rows(radii.iter().cloned().fold(0.0, f64::max));
     let mut out = vec![0.0f32; w * h * 3];
     out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         // diff[x] holds (r, g, b, weight) increments starting at column x.
@@ -368,9 +397,9 @@ pub fn naive_scatter<T: Real>(
             let sy = sy as usize;
             for sx in 0..w {
                 let j = sy * w + sx;
-                let Some((full, centre, edge)) = disc_row(radii[j], dy) else {
+                if (dy.unsigned_abs() as isize) > disc_rows(radii[j]) {
                     continue;
-                };
+                }
                 let wt = inv_area[j];
                 let v = [
                     lin[3 * j] as f64 * wt,
@@ -390,14 +419,15 @@ pub fn naive_scatter<T: Real>(
                     }
                 };
                 let sx = sx as isize;
-                if full == 0 && centre < 1.0 {
-                    add(sx, sx, centre);
-                    continue;
-                }
-                add(sx - full, sx + full, 1.0);
-                if edge > 0.0 {
-                    add(sx - full - 1, sx - full - 1, edge);
-                    add(sx + full + 1, sx + full + 1, edge);
+                for run in disc_row(radii[j], dy) {
+                    if run.inner <= 0.0 {
+                        continue;
+                    }
+                    add(sx - run.full, sx + run.full, run.inner);
+                    if run.edge > 0.0 {
+                        add(sx - run.full - 1, sx - run.full - 1, run.edge);
+                        add(sx + run.full + 1, sx + run.full + 1, run.edge);
+                    }
                 }
             }
         }
@@ -543,15 +573,35 @@ mod tests {
 
     #[test]
     fn disc_area_is_close_to_pi_r2_and_continuous() {
-        for rho in [0.5, 1.0, 2.5, 7.3, 20.0] {
+        for rho in [0.5, 1.0, 1.5, 2.5, 7.3, 20.0] {
             let a = disc_area(rho);
             let exact = std::f64::consts::PI * rho * rho;
-            assert!((a - exact).abs() / exact < 0.1, "rho {rho}: {a} vs {exact}");
+            assert!(
+                (a - exact).abs() / exact < 0.06,
+                "rho {rho}: {a} vs {exact}"
+            );
         }
-        assert!((disc_area(0.5) - 1.0).abs() < 1e-12);
-        // Continuous across a new row appearing.
+        // The smallest disc is the centre pixel alone.
+        let n = disc_rows(MIN_DISC_RADIUS_PX);
+        for dy in -n..=n {
+            for r in disc_row(MIN_DISC_RADIUS_PX, dy) {
+                assert!(r.full == 0 && r.edge == 0.0 && (dy == 0 || r.inner == 0.0));
+            }
+        }
+        // Continuous in the radius, and round: as wide as it is tall.
         let (a, b) = (disc_area(2.0 - 1e-9), disc_area(2.0 + 1e-9));
         assert!((a - b).abs() < 1e-3);
+        let rho = 3.2;
+        let width: f64 = disc_row(rho, 0)
+            .iter()
+            .map(|r| r.inner * (2 * r.full + 1) as f64 + 2.0 * r.edge)
+            .sum();
+        let n = disc_rows(rho);
+        let rows = (-n..=n)
+            .filter(|&dy| disc_row(rho, dy).iter().any(|r| r.inner > 0.0))
+            .count();
+        assert_eq!(rows, 7);
+        assert!((width - 2.0 * rho).abs() < 0.3, "{width}");
     }
 
     #[test]

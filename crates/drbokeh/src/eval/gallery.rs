@@ -293,6 +293,8 @@ table { border-collapse: collapse; }
 th, td { border: 1px solid #ccc; padding: 2px; font-size: 12px; vertical-align: top; }
 th { background: #eee; }
 img { width: 180px; height: auto; display: block; }
+figure { margin: 0; }
+figcaption { font-size: 12px; }
 .inputs { display: flex; gap: 8px; margin: 6px 0; }
 section { border-top: 2px solid #bbb; padding: 6px 0; }
 </style>

@@ -951,7 +951,7 @@ fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
 
 /// An SVG plot of one metric against the scene's largest CoC radius: each scene a point,
 /// each method a line through its per-bucket means.
-pub fn metric_plot_svg(report: &Report, title: &str, get: fn(&MethodResult) -> f64) -> String {
+pub fn metric_plot_svg(report: &Report, title: &str, get: MetricAccessor) -> String {
     let (w, h) = (760.0, 440.0);
     let (left, right, top, bottom) = (64.0, 190.0, 36.0, 48.0);
     let mut pts: Vec<(usize, f64, f64)> = Vec::new();
@@ -1094,18 +1094,26 @@ pub fn metric_plot_svg(report: &Report, title: &str, get: fn(&MethodResult) -> f
             xml_escape(&m.name)
         );
     }
-    let _ = writeln!(
-        s,
-        r##"<text x="{:.1}" y="{:.1}" font-size="10" fill="#555">dots: scenes; squares/lines: bucket means</text>"##,
-        w - right + 14.0,
-        h - bottom
-    );
+    for (i, line) in ["dots: scenes", "squares, lines: means", "per blur bucket"]
+        .iter()
+        .enumerate()
+    {
+        let _ = writeln!(
+            s,
+            r##"<text x="{:.1}" y="{:.1}" font-size="10" fill="#555">{line}</text>"##,
+            w - right + 14.0,
+            h - bottom - 28.0 + 13.0 * i as f64
+        );
+    }
     s.push_str("</svg>\n");
     s
 }
 
+/// Reads one metric from a result.
+pub type MetricAccessor = fn(&MethodResult) -> f64;
+
 /// The SVG plots written by [`write_report`]: (file name, metric title, accessor).
-pub fn plot_files() -> [(&'static str, &'static str, fn(&MethodResult) -> f64); 3] {
+pub fn plot_files() -> [(&'static str, &'static str, MetricAccessor); 3] {
     [
         ("psnr_vs_blur.svg", "PSNR (dB)", |r| r.psnr),
         ("ssim_vs_blur.svg", "SSIM", |r| r.ssim),
