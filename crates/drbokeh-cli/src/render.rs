@@ -58,7 +58,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
 
 fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let engine: Engine = a.exec.engine()?;
-    let stack = load_scene::<T>(&a.scene, a.camera.gamma, a.camera.offset)?;
+    let stack = load_scene::<T>(&a.scene, crate::args::tone_for(&a.camera)?)?;
     let (settings, note) = settings_for(&a.camera, &a.scene, &stack, engine)?;
     if let (Some(n), false) = (note, a.exec.quiet) {
         eprintln!("drbokeh: note: {n}");
@@ -68,14 +68,13 @@ fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let out = drbokeh::render(&stack, &settings, engine, &bar)?;
     bar.finish();
     let cam = &settings.camera;
+    let tone = settings.tone();
     let bit_depth = if a.bit_depth == 16 {
         BitDepth::Sixteen
     } else {
         BitDepth::Eight
     };
-    io::write_output(&a.output, &out, bit_depth, |v| {
-        drbokeh::model::linearize(v, cam.gamma, cam.offset)
-    })?;
+    io::write_output(&a.output, &out, bit_depth, |v| tone.linearize(v))?;
     if !a.exec.quiet {
         eprintln!(
             "drbokeh: rendered {}x{}, {} layer(s), focus {:.4}, K {}, L {} in {:.2} s -> {}",

@@ -62,7 +62,7 @@ pub fn run(a: &VjpArgs) -> Result<()> {
 }
 
 fn run_typed<T: Real>(a: &VjpArgs) -> Result<()> {
-    let stack = load_scene::<T>(&a.scene, a.camera.gamma, a.camera.offset)?;
+    let stack = load_scene::<T>(&a.scene, crate::args::tone_for(&a.camera)?)?;
     let (settings, _) = settings_for(&a.camera, &a.scene, &stack, drbokeh::Engine::Threaded)?;
     let g = drbokeh::io::read_npy_image::<T>(&a.grad_output, 3, "output gradient")?;
     if g.width != stack.width || g.height != stack.height {

@@ -6,7 +6,7 @@
 //! weight, `B_l` layer colour, `o_l` layer coverage, `T_l` transmittance.
 
 use crate::aperture::{Aperture, ApertureEval};
-use crate::camera::Camera;
+use crate::presets::{CoverageRadius, RenderSettings, Transfer};
 use crate::stack::Layer;
 use crate::Real;
 
@@ -19,10 +19,11 @@ pub fn relative_disparity<T: Real>(disparity: T, focus: T) -> T {
     disparity - focus
 }
 
-/// Scatter radius in pixels `r = K |d| + 1` (the +1 is the pixel footprint).
+/// Scatter radius in pixels `r = K |d| + footprint`: the paper's footprint is 1
+/// ([`crate::presets::Footprint`]); `dr/dd = K sign(d)`, `dr/dK = |d|` either way.
 #[inline(always)]
-pub fn scatter_radius_px<T: Real>(blur_k: T, rel_disp: T) -> T {
-    blur_k * rel_disp.abs() + T::one()
+pub fn scatter_radius_px<T: Real>(blur_k: T, rel_disp: T, footprint_px: T) -> T {
+    blur_k * rel_disp.abs() + footprint_px
 }
 
 /// Soft scatter step `S = 1 / (1 + 10 exp(-3 (r - dist)))` (supplement eq. 2, distance not
@@ -44,6 +45,8 @@ pub fn soft_step_fast<T: Real>(r_minus_dist: T) -> T {
 /// = 0.21 (r + 4.83) e^{-13.5} / r^2 < 2e-6` of weight per unit alpha (largest at r = 1),
 /// against a weight sum of at least `S(r)/r^2 ~ 0.67/r^2` from the receiver's own
 /// neighbourhood wherever the layer is opaque: a relative error below about 3e-6 / r^0.
+/// With the half-pixel footprint of preset `physical` (r >= 0.5) the bound is
+/// `0.21 * 5.33 e^{-13.5} / 0.25 < 6.2e-6` against at least `S(0.5)/0.25 = 1.24`: 5e-6.
 pub const SCATTER_TAIL_PX: f64 = 4.5;
 
 /// Derivative of [`soft_step`] with respect to `r - dist`, from its value: `3 S (1 - S)`.
@@ -145,6 +148,81 @@ pub fn box_coverage<T: Real>(half_size_px: usize, alpha_at: impl Fn(isize, isize
     sum / T::c(n as f64)
 }
 
+/// Smallest radius of the soft-disc coverage (keeps a kernel aperture's `v / r` finite).
+pub const MIN_COVERAGE_RADIUS_PX: f64 = 1e-6;
+
+/// Radius of the receiver's disc in the soft-disc coverage, from its scatter radius
+/// `r(x)`, and its derivative `dr_c/dr(x)`: `r(x)` itself ([`CoverageRadius::Scatter`]) or
+/// the circle of confusion `r(x) - footprint = K |d(x)|`
+/// ([`CoverageRadius::CircleOfConfusion`], at least [`MIN_COVERAGE_RADIUS_PX`]).
+#[inline(always)]
+pub fn coverage_radius_px<T: Real>(
+    radius_x_px: T,
+    kind: CoverageRadius,
+    footprint_px: T,
+) -> (T, T) {
+    match kind {
+        CoverageRadius::Scatter => (radius_x_px, T::one()),
+        CoverageRadius::CircleOfConfusion => {
+            let r = radius_x_px - footprint_px;
+            let min = T::c(MIN_COVERAGE_RADIUS_PX);
+            if r > min {
+                (r, T::one())
+            } else {
+                (min, T::zero())
+            }
+        }
+    }
+}
+
+/// Soft-disc layer coverage (spec "Beyond the paper"; preset `physical`): alpha averaged
+/// over the receiver's own soft aperture,
+/// `o(x) = sum_y M(x-y) S(r(x), y) a(y) / sum_y M(x-y) S(r(x), y)`,
+/// with the scatter term's S, M and aperture ([`scatter_term`]) but the radius `r(x)` of
+/// the receiver. Derivatives: `do/da(y) = S(r(x), y) / Z`, `do/dr(x) = sum_y S'(a(y) - o) / Z`
+/// with `Z = sum_y M S(r(x), y)` (at least `S(r(x), 0) >= 2/3`, the centre tap).
+/// Accumulate every masked tap with [`DiscCoverage::add`] (or `add_with_derivative`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DiscCoverage<T> {
+    /// `sum_y S a(y)`.
+    pub alpha_sum: T,
+    /// `Z = sum_y S`.
+    pub weight: T,
+    /// `sum_y S' a(y)` (`S' = dS/dr(x)`), when derivatives are accumulated.
+    pub d_alpha_sum: T,
+    /// `sum_y S'`, when derivatives are accumulated.
+    pub d_weight: T,
+}
+
+impl<T: Real> DiscCoverage<T> {
+    /// Adds one tap: its scatter term `S(r(x), y)` and alpha `a(y)`.
+    #[inline(always)]
+    pub fn add(&mut self, scatter: T, alpha_y: T) {
+        self.alpha_sum = self.alpha_sum + scatter * alpha_y;
+        self.weight = self.weight + scatter;
+    }
+
+    /// Adds one tap with the derivative of its scatter term with respect to `r(x)`.
+    #[inline(always)]
+    pub fn add_with_derivative(&mut self, scatter: T, d_scatter_dr: T, alpha_y: T) {
+        self.add(scatter, alpha_y);
+        self.d_alpha_sum = self.d_alpha_sum + d_scatter_dr * alpha_y;
+        self.d_weight = self.d_weight + d_scatter_dr;
+    }
+
+    /// The coverage `o(x) = sum S a / Z`.
+    #[inline(always)]
+    pub fn value(&self) -> T {
+        self.alpha_sum / self.weight
+    }
+
+    /// `do/dr(x) = (sum S' a - o sum S') / Z` (needs `add_with_derivative`).
+    #[inline(always)]
+    pub fn derivative_radius(&self) -> T {
+        (self.d_alpha_sum - self.value() * self.d_weight) / self.weight
+    }
+}
+
 /// Display encoding to linear: `lin = (I + offset)^g`.
 #[inline(always)]
 pub fn linearize<T: Real>(encoded: T, gamma: T, offset: T) -> T {
@@ -166,6 +244,116 @@ pub fn encode_derivative<T: Real>(linear: T, gamma: T) -> T {
     linear.powf(T::one() / gamma - T::one()) / gamma
 }
 
+/// Exact sRGB decoding (IEC 61966-2-1; spec "Beyond the paper", preset `physical`) and its
+/// derivative `(lin, dlin/dI)`:
+/// `lin = I / 12.92` if `I <= 0.04045`, else `((I + 0.055) / 1.055)^2.4`;
+/// `dlin/dI = 1 / 12.92`, else `(2.4 / 1.055) ((I + 0.055) / 1.055)^1.4`.
+#[inline(always)]
+pub fn srgb_to_linear_with_derivative<T: Real>(encoded: T) -> (T, T) {
+    if encoded <= T::c(0.04045) {
+        (encoded / T::c(12.92), T::one() / T::c(12.92))
+    } else {
+        let b = (encoded + T::c(0.055)) / T::c(1.055);
+        (b.powf(T::c(2.4)), T::c(2.4 / 1.055) * b.powf(T::c(1.4)))
+    }
+}
+
+/// Exact sRGB encoding, the inverse of [`srgb_to_linear_with_derivative`]:
+/// `I = 12.92 lin` if `lin <= 0.0031308`, else `1.055 lin^(1/2.4) - 0.055`.
+#[inline(always)]
+pub fn linear_to_srgb<T: Real>(linear: T) -> T {
+    if linear <= T::c(0.0031308) {
+        T::c(12.92) * linear
+    } else {
+        T::c(1.055) * linear.powf(T::c(1.0 / 2.4)) - T::c(0.055)
+    }
+}
+
+/// Derivative of [`linear_to_srgb`]: `12.92`, else `(1.055 / 2.4) lin^(1/2.4 - 1)`.
+#[inline(always)]
+pub fn linear_to_srgb_derivative<T: Real>(linear: T) -> T {
+    if linear <= T::c(0.0031308) {
+        T::c(12.92)
+    } else {
+        T::c(1.055 / 2.4) * linear.powf(T::c(1.0 / 2.4 - 1.0))
+    }
+}
+
+/// The display transfer of a render: the model option [`Transfer`] with the camera's gamma
+/// and offset (used by [`Transfer::Gamma`] only).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tone {
+    /// Which curve.
+    pub transfer: Transfer,
+    /// Gamma `g` of [`Transfer::Gamma`].
+    pub gamma: f64,
+    /// Offset of [`Transfer::Gamma`].
+    pub offset: f64,
+}
+
+impl Tone {
+    /// A transfer with the camera's gamma and offset.
+    pub fn new(transfer: Transfer, gamma: f64, offset: f64) -> Self {
+        Tone {
+            transfer,
+            gamma,
+            offset,
+        }
+    }
+
+    /// The tone of a render's settings.
+    pub fn of(settings: &RenderSettings) -> Self {
+        settings.tone()
+    }
+
+    /// Display-encoded value to linear, and its derivative `dlin/dI`. For the gamma curve:
+    /// [`linearize`] and `g (I + offset)^(g-1)` (0 where `I + offset <= 0`).
+    #[inline(always)]
+    pub fn linearize_with_derivative<T: Real>(&self, encoded: T) -> (T, T) {
+        match self.transfer {
+            Transfer::Gamma => {
+                let (gamma, offset) = (T::c(self.gamma), T::c(self.offset));
+                let base = encoded + offset;
+                let lin = base.powf(gamma);
+                let dlin = if base > T::zero() {
+                    gamma * base.powf(gamma - T::one())
+                } else {
+                    T::zero()
+                };
+                (lin, dlin)
+            }
+            Transfer::Srgb => srgb_to_linear_with_derivative(encoded),
+        }
+    }
+
+    /// Display-encoded value to linear.
+    #[inline(always)]
+    pub fn linearize<T: Real>(&self, encoded: T) -> T {
+        match self.transfer {
+            Transfer::Gamma => linearize(encoded, T::c(self.gamma), T::c(self.offset)),
+            Transfer::Srgb => srgb_to_linear_with_derivative(encoded).0,
+        }
+    }
+
+    /// Linear to display encoding ([`encode`] or [`linear_to_srgb`]).
+    #[inline(always)]
+    pub fn encode<T: Real>(&self, linear: T) -> T {
+        match self.transfer {
+            Transfer::Gamma => encode(linear, T::c(self.gamma), T::c(self.offset)),
+            Transfer::Srgb => linear_to_srgb(linear),
+        }
+    }
+
+    /// Derivative of [`Tone::encode`] ([`encode_derivative`] or [`linear_to_srgb_derivative`]).
+    #[inline(always)]
+    pub fn encode_derivative<T: Real>(&self, linear: T) -> T {
+        match self.transfer {
+            Transfer::Gamma => encode_derivative(linear, T::c(self.gamma)),
+            Transfer::Srgb => linear_to_srgb_derivative(linear),
+        }
+    }
+}
+
 /// Linear colour of a source pixel, and its partial derivatives. With `highlight`, the
 /// display-encoded value is first boosted by `1 + 0.2 m`, with
 /// `m = clip(tanh(200 ((disp - f)^2 - 0.01)), 0, 1) * clip(tanh(10 (I - 200/255)), 0, 1)`.
@@ -177,8 +365,7 @@ pub fn source_linear_with_derivatives<T: Real>(
     encoded: T,
     rel_disp: T,
     highlight: bool,
-    gamma: T,
-    offset: T,
+    tone: &Tone,
 ) -> (T, T, T) {
     let (boosted, d_boost_di, d_boost_dd) = if highlight {
         let arg_p = T::c(200.0) * (rel_disp * rel_disp - T::c(0.01));
@@ -204,13 +391,7 @@ pub fn source_linear_with_derivatives<T: Real>(
     } else {
         (encoded, T::one(), T::zero())
     };
-    let base = boosted + offset;
-    let lin = base.powf(gamma);
-    let dlin = if base > T::zero() {
-        gamma * base.powf(gamma - T::one())
-    } else {
-        T::zero()
-    };
+    let (lin, dlin) = tone.linearize_with_derivative(boosted);
     (lin, dlin * d_boost_di, dlin * d_boost_dd)
 }
 
@@ -379,10 +560,13 @@ pub struct PreparedLayer<T> {
     pub focus_weight: Vec<T>,
 }
 
-/// Computes the per-pixel terms of a layer for a camera.
-pub fn prepare_layer<T: Real>(layer: &Layer<T>, camera: &Camera) -> PreparedLayer<T> {
+/// Computes the per-pixel terms of a layer for a render's settings (camera, display
+/// transfer, footprint).
+pub fn prepare_layer<T: Real>(layer: &Layer<T>, settings: &RenderSettings) -> PreparedLayer<T> {
+    let camera = &settings.camera;
+    let tone = &settings.tone();
+    let footprint = T::c(settings.model().footprint.px());
     let (k, f) = (T::c(camera.blur_k), T::c(camera.focus_disparity));
-    let (g, off) = (T::c(camera.gamma), T::c(camera.offset));
     let rel_disp: Vec<T> = layer
         .disparity
         .data
@@ -392,7 +576,7 @@ pub fn prepare_layer<T: Real>(layer: &Layer<T>, camera: &Camera) -> PreparedLaye
     let mut rgb_linear = Vec::with_capacity(layer.rgb_encoded.data.len());
     for (px, &d) in layer.rgb_encoded.data.chunks_exact(3).zip(&rel_disp) {
         for &encoded in px {
-            rgb_linear.push(source_linear_with_derivatives(encoded, d, camera.highlight, g, off).0);
+            rgb_linear.push(source_linear_with_derivatives(encoded, d, camera.highlight, tone).0);
         }
     }
     PreparedLayer {
@@ -400,7 +584,10 @@ pub fn prepare_layer<T: Real>(layer: &Layer<T>, camera: &Camera) -> PreparedLaye
         height: layer.alpha.height,
         rgb_linear,
         alpha: layer.alpha.data.clone(),
-        radius_px: rel_disp.iter().map(|&d| scatter_radius_px(k, d)).collect(),
+        radius_px: rel_disp
+            .iter()
+            .map(|&d| scatter_radius_px(k, d, footprint))
+            .collect(),
         focus_weight: rel_disp.iter().map(|&d| focus_weight(k, d)).collect(),
         rel_disp,
     }

@@ -1,8 +1,96 @@
 //! Presets: named bundles of model choices, and the settings a render needs.
+//!
+//! A preset fixes the [`ModelOptions`]: which form of each replaceable model term is used.
+//! `paper` is the published model; `physical` keeps the paper's equation and replaces the
+//! terms that a ray-traced benchmark shows to be furthest from a real lens (see
+//! `shared/spec/rendering-model.md`, "Beyond the paper", and `docs/physical.md`). For
+//! ablations, [`Preset::Custom`] takes any combination of options, one changed at a time.
 
 use crate::aperture::Aperture;
 use crate::camera::Camera;
 use crate::{Error, Result};
+
+/// How the layer coverage `o_l(x)` is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Coverage {
+    /// The paper: mean of alpha over the square of half-size `min(floor(r(x)/2), R)`.
+    PaperBox,
+    /// Alpha averaged over the receiver's own soft aperture:
+    /// `o(x) = sum_y M S(r(x), y) a(y) / sum_y M S(r(x), y)` (same S, M and aperture as
+    /// the scatter term, radius of the receiver). Continuous in `r(x)`.
+    SoftDisc,
+}
+
+/// The radius of the receiver's disc in [`Coverage::SoftDisc`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CoverageRadius {
+    /// The receiver's scatter radius `r(x) = K |d(x)| + 1` (the scatter term's radius).
+    Scatter,
+    /// The circle of confusion alone, `K |d(x)|` (no `+1` pixel footprint), so that an
+    /// in-focus receiver's coverage is (nearly) its own alpha.
+    CircleOfConfusion,
+}
+
+/// The pixel footprint added to the circle of confusion in the scatter radius
+/// `r = K |d| + footprint` (spec: "the +1 is the pixel footprint").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Footprint {
+    /// The paper's `+1`.
+    Pixel,
+    /// `+0.5`: half the pixel pitch. The soft step `S(r - dist)` is 1/2 at
+    /// `dist = r - ln(10)/3 = r - 0.77`, so even `+1` already gives in-focus pixels a soft
+    /// edge; the benchmark prefers the smaller footprint (docs/physical.md).
+    HalfPixel,
+}
+
+impl Footprint {
+    /// The footprint in pixels.
+    pub fn px(self) -> f64 {
+        match self {
+            Footprint::Pixel => 1.0,
+            Footprint::HalfPixel => 0.5,
+        }
+    }
+}
+
+/// The display transfer used to linearise inputs and encode the output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Transfer {
+    /// The paper: `lin = (I + offset)^g` with the camera's gamma and offset.
+    Gamma,
+    /// The exact sRGB curve (IEC 61966-2-1); the camera's gamma and offset are not used.
+    Srgb,
+}
+
+/// The replaceable terms of the model, one field per term.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ModelOptions {
+    /// Layer coverage term.
+    pub coverage: Coverage,
+    /// Radius of the soft-disc coverage (unused by [`Coverage::PaperBox`]).
+    pub coverage_radius: CoverageRadius,
+    /// Display transfer.
+    pub transfer: Transfer,
+    /// Pixel footprint in the scatter radius.
+    pub footprint: Footprint,
+}
+
+impl ModelOptions {
+    /// The published model's choices.
+    pub const PAPER: ModelOptions = ModelOptions {
+        coverage: Coverage::PaperBox,
+        coverage_radius: CoverageRadius::Scatter,
+        transfer: Transfer::Gamma,
+        footprint: Footprint::Pixel,
+    };
+    /// The `physical` preset's choices.
+    pub const PHYSICAL: ModelOptions = ModelOptions {
+        coverage: Coverage::SoftDisc,
+        coverage_radius: CoverageRadius::CircleOfConfusion,
+        transfer: Transfer::Srgb,
+        footprint: Footprint::HalfPixel,
+    };
+}
 
 /// A named bundle of model choices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -11,17 +99,39 @@ pub enum Preset {
     /// box coverage of half-size `floor(r/2)`, gamma transfer.
     #[default]
     Paper,
+    /// The paper's equation with the terms measured to be closer to a real lens: coverage
+    /// averaged over the receiver's soft aperture disc of radius `K |d(x)|` (its circle of
+    /// confusion), exact sRGB transfer, scatter radius `K |d| + 0.5`.
+    Physical,
+    /// Any combination of options (for ablations); not selectable by name.
+    Custom(ModelOptions),
 }
 
 impl Preset {
-    /// All presets, for `--help` and error messages.
-    pub const ALL: &'static [(&'static str, &'static str)] =
-        &[("paper", "the published Dr.Bokeh model, exactly")];
+    /// All named presets, for `--help` and error messages.
+    pub const ALL: &'static [(&'static str, &'static str)] = &[
+        ("paper", "the published Dr.Bokeh model, exactly"),
+        (
+            "physical",
+            "the paper's equation, coverage over the soft aperture disc, exact sRGB",
+        ),
+    ];
 
-    /// The preset's CLI name.
+    /// The preset's CLI name (`custom` for [`Preset::Custom`]).
     pub fn name(self) -> &'static str {
         match self {
             Preset::Paper => "paper",
+            Preset::Physical => "physical",
+            Preset::Custom(_) => "custom",
+        }
+    }
+
+    /// The model options this preset stands for.
+    pub fn options(self) -> ModelOptions {
+        match self {
+            Preset::Paper => ModelOptions::PAPER,
+            Preset::Physical => ModelOptions::PHYSICAL,
+            Preset::Custom(o) => o,
         }
     }
 }
@@ -31,6 +141,7 @@ impl std::str::FromStr for Preset {
     fn from_str(s: &str) -> Result<Self> {
         match s {
             "paper" => Ok(Preset::Paper),
+            "physical" => Ok(Preset::Physical),
             _ => Err(Error::param(
                 "--preset",
                 format!(
@@ -53,7 +164,7 @@ pub struct RenderSettings {
     pub camera: Camera,
     /// Aperture shape.
     pub aperture: Aperture,
-    /// Model preset.
+    /// Model preset (its [`Preset::options`] select the model's terms).
     pub preset: Preset,
 }
 
@@ -65,6 +176,37 @@ impl RenderSettings {
             aperture: Aperture::Circle,
             preset: Preset::Paper,
         }
+    }
+
+    /// Like [`RenderSettings::paper`] with the `physical` preset.
+    pub fn physical(focus_disparity: f64) -> Self {
+        RenderSettings {
+            preset: Preset::Physical,
+            ..RenderSettings::paper(focus_disparity)
+        }
+    }
+
+    /// The model options in effect.
+    pub fn model(&self) -> ModelOptions {
+        self.preset.options()
+    }
+
+    /// These settings with the model options replaced (as [`Preset::Custom`] unless they
+    /// equal a named preset's).
+    pub fn with_model(mut self, options: ModelOptions) -> Self {
+        self.preset = if options == ModelOptions::PAPER {
+            Preset::Paper
+        } else if options == ModelOptions::PHYSICAL {
+            Preset::Physical
+        } else {
+            Preset::Custom(options)
+        };
+        self
+    }
+
+    /// The display transfer of these settings.
+    pub fn tone(&self) -> crate::model::Tone {
+        crate::model::Tone::new(self.model().transfer, self.camera.gamma, self.camera.offset)
     }
 
     /// Validates camera and aperture.

@@ -6,6 +6,7 @@ mod common;
 
 use common::random_stack;
 use drbokeh::aperture::KernelImage;
+use drbokeh::presets::ModelOptions;
 use drbokeh::{
     render, Aperture, Engine, Image, Layer, LayerStack, NoProgress, RenderSettings, Window,
 };
@@ -111,5 +112,40 @@ fn fast_is_identical_for_any_thread_count() {
     let one = run(1);
     for n in [2, 3, 5] {
         assert_eq!(one.data, run(n).data);
+    }
+}
+
+/// `max |a^2.4-ish - b|` in linear light for the sRGB transfer.
+fn max_linear_diff_srgb<A: drbokeh::Real, B: drbokeh::Real>(a: &Image<A>, b: &Image<B>) -> f64 {
+    let lin = |v: f64| drbokeh::model::srgb_to_linear_with_derivative(v).0;
+    a.data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (lin(x.f64()) - lin(y.f64())).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn fast_matches_reference_for_the_physical_preset() {
+    for (i, aperture) in apertures().into_iter().enumerate() {
+        let stack = random_stack::<f64>(40 + i as u64, 70, 53, 3);
+        let s = settings(0.5, 14.0, 21, aperture.clone()).with_model(ModelOptions::PHYSICAL);
+        let reference = render(&stack, &s, Engine::Reference, &NoProgress).unwrap();
+        let fast64 = render(&stack, &s, Engine::Fast, &NoProgress).unwrap();
+        let fast32 = render(&stack.cast::<f32>(), &s, Engine::Fast, &NoProgress).unwrap();
+        let d64 = max_linear_diff_srgb(&reference, &fast64);
+        let d32 = max_linear_diff_srgb(&reference, &fast32);
+        assert!(d64 <= 1e-5, "{aperture:?}: f64 fast vs reference {d64:e}");
+        assert!(d32 <= 1e-5, "{aperture:?}: f32 fast vs reference {d32:e}");
+    }
+    let stack = blobs(75, 90);
+    for (focus, k, window) in [(0.85, 30.0, 41), (0.5, 2.0, 9)] {
+        for aperture in apertures() {
+            let s = settings(focus, k, window, aperture.clone()).with_model(ModelOptions::PHYSICAL);
+            let reference = render(&stack, &s, Engine::Reference, &NoProgress).unwrap();
+            let fast = render(&stack.cast::<f32>(), &s, Engine::Fast, &NoProgress).unwrap();
+            let d = max_linear_diff_srgb(&reference, &fast);
+            assert!(d <= 1e-5, "focus {focus} K {k} {aperture:?}: {d:e}");
+        }
     }
 }

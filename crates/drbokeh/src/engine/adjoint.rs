@@ -14,8 +14,11 @@
 //! - normalisation: `dB/dc(y,x) = (Ilin(y) - B(x)) / (W(x) + 1e-8)`;
 //! - tap weight `c = a(y) S(r(y), .) / r(y)^2 O(d(y), d(x), e(x))`, `r = K|d| + 1`,
 //!   `e = exp(-3 (K d(x))^2)`, `d = disp - f`;
-//! - coverage: a box mean of alpha; its half-size `floor(r/2)` is piecewise constant, so
-//!   it contributes nothing through r (as in the paper).
+//! - coverage, [`Coverage::PaperBox`]: a box mean of alpha; its half-size `floor(r/2)` is
+//!   piecewise constant, so it contributes nothing through r (as in the paper);
+//! - coverage, [`Coverage::SoftDisc`]: `o = sum S(r(x), y) a(y) / Z`, with
+//!   `do/da(y) = S / Z` and `do/dr(x) = sum S' (a(y) - o) / Z` ([`model::DiscCoverage`]);
+//! - tone: gamma or exact sRGB ([`model::Tone`]), both in the model beside their derivatives.
 //!
 //! Passes: (A) over receivers x: the gradient reaching `d(x)` and K through `O`/`e`;
 //! (B) over padded source pixels y: gradients reaching `Ilin(y)`, `a(y)`, `d(y)` and K
@@ -26,7 +29,7 @@ use super::threaded::{pad_layers, Kernel, PaddedLayer};
 use super::Progress;
 use crate::image::Image;
 use crate::model;
-use crate::presets::RenderSettings;
+use crate::presets::{Coverage, RenderSettings};
 use crate::stack::LayerStack;
 use crate::{Error, Real, Result};
 use rayon::prelude::*;
@@ -91,7 +94,7 @@ pub fn render_with_tape<T: Real>(
     settings.validate()?;
     progress.start(stack.height as u64);
     let cam = &settings.camera;
-    let (g, off) = (T::c(cam.gamma), T::c(cam.offset));
+    let tone = settings.tone();
     let f = T::c(cam.focus_disparity);
     let layers = pad_layers(stack, settings);
     let stride = layers[0].stride;
@@ -128,7 +131,7 @@ pub fn render_with_tape<T: Real>(
     let mut linear = Vec::with_capacity(w * h);
     for (i, (s, lin)) in rows.into_iter().flatten().enumerate() {
         for c in 0..3 {
-            out.data[3 * i + c] = model::encode(lin[c], g, off);
+            out.data[3 * i + c] = tone.encode(lin[c]);
         }
         saved.push(s);
         linear.push(lin);
@@ -146,7 +149,7 @@ pub fn render_with_tape<T: Real>(
             let (mut a, mut b) = ([T::zero(); 3], [T::zero(); 3]);
             for c in 0..3 {
                 let (_, x, y) =
-                    model::source_linear_with_derivatives(px[c], d, cam.highlight, g, off);
+                    model::source_linear_with_derivatives(px[c], d, cam.highlight, &tone);
                 a[c] = x;
                 b[c] = y;
             }
@@ -203,7 +206,7 @@ impl<T: Real> Tape<T> {
         }
         grad_output.check_finite("output gradient")?;
         let n_layers = self.layers.len();
-        let g = T::c(self.settings.camera.gamma);
+        let tone = self.settings.tone();
         let eps = T::c(model::WEIGHT_EPSILON);
         progress.start((n_layers * 3) as u64 + 1);
 
@@ -214,8 +217,8 @@ impl<T: Real> Tape<T> {
                 let saved = &self.saved[i];
                 let mut g_lin = [T::zero(); 3];
                 for c in 0..3 {
-                    g_lin[c] = grad_output.data[3 * i + c]
-                        * model::encode_derivative(self.linear[i][c], g);
+                    g_lin[c] =
+                        grad_output.data[3 * i + c] * tone.encode_derivative(self.linear[i][c]);
                 }
                 // U_l from the back.
                 let mut behind = vec![[T::zero(); 3]; n_layers + 1];
@@ -369,6 +372,13 @@ impl<T: Real> Tape<T> {
                             g_d = g_d + base * (do_ddx + do_de * de_dd);
                             g_k = g_k + base * do_de * de_dk;
                         }
+                        if kernel.coverage == Coverage::SoftDisc {
+                            // o(x) depends on r(x) = K |d(x)| + 1.
+                            let g_r = rg.d_coverage[i]
+                                * kernel.disc_coverage(layer, xi, true).derivative_radius();
+                            g_d = g_d + g_r * k * sign(d_x);
+                            g_k = g_k + g_r * d_x.abs();
+                        }
                         k_sum += g_k.f64();
                         g_d
                     })
@@ -449,15 +459,8 @@ impl<T: Real> Tape<T> {
                             g_dy = g_dy + gc * a_y * s * inv_area * do_ddy;
                         }
                         // r = K |d| + 1
-                        let sign = if d_y > T::zero() {
-                            T::one()
-                        } else if d_y < T::zero() {
-                            -T::one()
-                        } else {
-                            T::zero()
-                        };
                         k_sum += (g_r * d_y.abs()).f64();
-                        (g_lin, g_a, g_dy + g_r * k * sign)
+                        (g_lin, g_a, g_dy + g_r * k * sign(d_y))
                     })
                     .collect();
                 (row, k_sum)
@@ -481,9 +484,77 @@ impl<T: Real> Tape<T> {
         (g_lin, g_a, g_d, k_total)
     }
 
-    /// Pass C: coverage `o(x) = mean of alpha over a box of half-size h(x)`; each padded
-    /// pixel gathers `dL/do(x) / n(x)` from the receivers whose box holds it.
+    /// Pass C: coverage's gradient to alpha, for the model's coverage term.
     fn pass_coverage(
+        &self,
+        layer: &PaddedLayer<T>,
+        kernel: &Kernel<T>,
+        rg: &ReceiverGrads<T>,
+    ) -> Vec<T> {
+        match kernel.coverage {
+            Coverage::PaperBox => self.pass_coverage_box(layer, kernel, rg),
+            Coverage::SoftDisc => self.pass_coverage_disc(layer, kernel, rg),
+        }
+    }
+
+    /// Soft-disc coverage `o(x) = sum_y S(r(x), y) a(y) / Z(x)`: each padded pixel y
+    /// gathers `dL/do(x) S(r(x), y) / Z(x)` from the receivers whose window holds it.
+    fn pass_coverage_disc(
+        &self,
+        layer: &PaddedLayer<T>,
+        kernel: &Kernel<T>,
+        rg: &ReceiverGrads<T>,
+    ) -> Vec<T> {
+        let (w, h, stride, big_r) = (self.width, self.height, layer.stride, kernel.big_r);
+        let share: Vec<T> = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let xi = (i / w + big_r) * stride + i % w + big_r;
+                rg.d_coverage[i] / kernel.disc_coverage(layer, xi, false).weight
+            })
+            .collect();
+        let padded_h = layer.alpha.len() / stride;
+        let padded: Vec<T> = (0..padded_h)
+            .into_par_iter()
+            .flat_map_iter(|py| {
+                let share = &share;
+                (0..stride).map(move |px| {
+                    let yi = py * stride + px;
+                    let mut acc = T::zero();
+                    for ((tap, &offset), &(dist, gauge)) in kernel
+                        .taps
+                        .iter()
+                        .zip(&kernel.offsets)
+                        .zip(&kernel.geometry)
+                    {
+                        let xp = yi as isize - offset;
+                        let Some(x) = self.inner(xp, stride, big_r) else {
+                            continue;
+                        };
+                        let (r_x, _) = model::coverage_radius_px(
+                            layer.radius_px[xp as usize],
+                            kernel.coverage_radius,
+                            kernel.footprint_px,
+                        );
+                        let s =
+                            model::scatter_term(&kernel.aperture, tap.dx, tap.dy, dist, gauge, r_x);
+                        acc = acc + share[x] * s;
+                    }
+                    acc
+                })
+            })
+            .collect();
+        let mut out = vec![T::zero(); w * h];
+        for (p, v) in padded.into_iter().enumerate() {
+            let s = layer.source[p];
+            out[s] = out[s] + v;
+        }
+        out
+    }
+
+    /// Paper coverage `o(x) = mean of alpha over a box of half-size h(x)`; each padded
+    /// pixel gathers `dL/do(x) / n(x)` from the receivers whose box holds it.
+    fn pass_coverage_box(
         &self,
         layer: &PaddedLayer<T>,
         kernel: &Kernel<T>,
@@ -535,6 +606,18 @@ impl<T: Real> Tape<T> {
             out[s] = out[s] + v;
         }
         out
+    }
+}
+
+/// `d|d|/dd`: the sign of `d` (0 at the kink).
+#[inline(always)]
+fn sign<T: Real>(d: T) -> T {
+    if d > T::zero() {
+        T::one()
+    } else if d < T::zero() {
+        -T::one()
+    } else {
+        T::zero()
     }
 }
 

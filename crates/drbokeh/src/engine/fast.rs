@@ -16,7 +16,10 @@
 //!   `exp` is [`Real::exp_fast`] (f32: polynomial, < 4e-7 relative error) and `tanh` is
 //!   written through it. Where `e(x) < 1e-9` the occlusion term is 1 to within 1e-9 and
 //!   is not evaluated.
-//! - **Coverage** from a summed-area table (f64) of the padded alpha: O(1) per pixel.
+//! - **Coverage**: the paper's box from a summed-area table (f64) of the padded alpha, O(1)
+//!   per pixel; the soft-disc coverage (preset `physical`) as a gather bounded by the
+//!   receiver's own reach `r(x) + tail` ([`ApertureEval::reach_px`]): the dropped ring
+//!   weighs below 2e-6 against a weight sum of at least 2/3 (the centre tap).
 //!
 //! Kernel apertures use the model's scalar scatter term inside the same tile bounds.
 //! Output agrees with the reference engine to about 1e-6 in linear light (tested to
@@ -27,7 +30,7 @@ use super::Progress;
 use crate::aperture::ApertureEval;
 use crate::image::Image;
 use crate::model;
-use crate::presets::RenderSettings;
+use crate::presets::{Coverage, RenderSettings};
 use crate::stack::{Layer, LayerStack};
 use crate::Real;
 use rayon::prelude::*;
@@ -64,12 +67,9 @@ impl<T: Real> BandLayer<T> {
         let cam = &settings.camera;
         let (w, h) = (layer.alpha.width, layer.alpha.height);
         let (stride, rows) = (w + 2 * pad, y1 - y0 + 2 * pad);
-        let (k, f, g, off) = (
-            T::c(cam.blur_k),
-            T::c(cam.focus_disparity),
-            T::c(cam.gamma),
-            T::c(cam.offset),
-        );
+        let (k, f) = (T::c(cam.blur_k), T::c(cam.focus_disparity));
+        let tone = settings.tone();
+        let footprint = T::c(settings.model().footprint.px());
         let n = stride * rows;
         let mut b = BandLayer {
             stride,
@@ -90,10 +90,10 @@ impl<T: Real> BandLayer<T> {
                 let sx = model::reflect(px as isize - pad as isize, w);
                 let i = sy * w + sx;
                 let d = model::relative_disparity(layer.disparity.data[i], f);
-                let r = model::scatter_radius_px(k, d);
+                let r = model::scatter_radius_px(k, d, footprint);
                 let rgb = &layer.rgb_encoded.data[3 * i..3 * i + 3];
                 let lin =
-                    |v: T| model::source_linear_with_derivatives(v, d, cam.highlight, g, off).0;
+                    |v: T| model::source_linear_with_derivatives(v, d, cam.highlight, &tone).0;
                 b.red.push(lin(rgb[0]));
                 b.green.push(lin(rgb[1]));
                 b.blue.push(lin(rgb[2]));
@@ -170,7 +170,7 @@ pub(super) fn render<T: Real>(
     let tables = WindowTables::<T>::new(settings);
     let band_rows = BAND_ROWS.max(2 * tables.big_r);
     let aperture = ApertureEval::<T>::new(&settings.aperture);
-    let (g, off) = (T::c(settings.camera.gamma), T::c(settings.camera.offset));
+    let tone = settings.tone();
     let mut out = Image::new(w, h, 3);
     let taps: u64 = out
         .data
@@ -196,7 +196,7 @@ pub(super) fn render<T: Real>(
             }
             for (i, lin) in linear.iter().enumerate() {
                 for c in 0..3 {
-                    chunk[3 * i + c] = model::encode(lin[c], g, off);
+                    chunk[3 * i + c] = tone.encode(lin[c]);
                 }
             }
             progress.advance((y1 - y0) as u64);
@@ -262,6 +262,9 @@ fn render_band_layer<T: Real>(
     let k = T::c(settings.camera.blur_k);
     let eps = T::c(model::WEIGHT_EPSILON);
     let cutoff = T::c(FOCUS_WEIGHT_CUTOFF);
+    let coverage_kind = settings.model().coverage;
+    let coverage_radius = settings.model().coverage_radius;
+    let footprint = T::c(settings.model().footprint.px());
     // Per block of ROW_BLOCK padded rows and per padded column, the largest radius among
     // sources with alpha > 0.
     let blocks = b.rows.div_ceil(ROW_BLOCK);
@@ -372,11 +375,24 @@ fn render_band_layer<T: Real>(
                     }
                 }
                 let inv = T::one() / (weight + eps);
-                let half = model::coverage_half_size_px(b.radius[xi], big_r);
-                let (r0, c0) = (y + big_r - half, x + big_r - half);
-                let n = (2 * half + 1) as f64;
-                let coverage =
-                    T::c(b.alpha_box_sum(r0, r0 + 2 * half + 1, c0, c0 + 2 * half + 1) / (n * n));
+                let coverage = match coverage_kind {
+                    Coverage::PaperBox => {
+                        let half = model::coverage_half_size_px(b.radius[xi], big_r);
+                        let (r0, c0) = (y + big_r - half, x + big_r - half);
+                        let n = (2 * half + 1) as f64;
+                        T::c(
+                            b.alpha_box_sum(r0, r0 + 2 * half + 1, c0, c0 + 2 * half + 1) / (n * n),
+                        )
+                    }
+                    // No source with alpha > 0 in the window: o = 0 exactly.
+                    Coverage::SoftDisc if widths.is_empty() => T::zero(),
+                    Coverage::SoftDisc => {
+                        let (c, n) =
+                            disc_coverage(b, tables, aperture, xi, coverage_radius, footprint);
+                        taps += n;
+                        c
+                    }
+                };
                 let o = y * w + x;
                 let t = transmittance[o];
                 for c in 0..3 {
@@ -387,6 +403,59 @@ fn render_band_layer<T: Real>(
         }
     }
     taps
+}
+
+/// Soft-disc coverage `o(x)` ([`model::DiscCoverage`]) at padded receiver `xi`, over the
+/// taps within the receiver's reach `r(x) + tail`; returns it and the number of taps.
+#[inline(always)]
+fn disc_coverage<T: Real>(
+    b: &BandLayer<T>,
+    tables: &WindowTables<T>,
+    aperture: &ApertureEval<T>,
+    xi: usize,
+    radius_kind: crate::presets::CoverageRadius,
+    footprint: T,
+) -> (T, u64) {
+    let big_r = tables.big_r as isize;
+    let (r_x, _) = model::coverage_radius_px(b.radius[xi], radius_kind, footprint);
+    let reach = aperture.reach_px(r_x.f64());
+    let mut disc = model::DiscCoverage::<T>::default();
+    let mut taps = 0u64;
+    for dy in -big_r..=big_r {
+        let Some(hw) = tables.half_width(dy, reach) else {
+            continue;
+        };
+        let row = (xi as isize + dy * b.stride as isize) as usize;
+        let t = (dy + big_r) as usize;
+        let g0 = tables.big_r - hw;
+        let n = 2 * hw + 1;
+        taps += n as u64;
+        let alpha = &b.alpha[row - hw..row - hw + n];
+        let gauge = &tables.gauge[t][g0..g0 + n];
+        match aperture {
+            ApertureEval::Gauge => {
+                let (mut sa, mut sw) = ([T::zero(); LANES], [T::zero(); LANES]);
+                for i in 0..n {
+                    let s = model::soft_step_fast(r_x - gauge[i]);
+                    sa[i % LANES] = sa[i % LANES] + s * alpha[i];
+                    sw[i % LANES] = sw[i % LANES] + s;
+                }
+                for l in 0..LANES {
+                    disc.alpha_sum = disc.alpha_sum + sa[l];
+                    disc.weight = disc.weight + sw[l];
+                }
+            }
+            ApertureEval::Kernel(..) => {
+                let dist = &tables.dist[t][g0..g0 + n];
+                for i in 0..n {
+                    let dx = i as isize - hw as isize;
+                    let s = model::scatter_term(aperture, dx, dy, T::c(dist[i]), gauge[i], r_x);
+                    disc.add(s, alpha[i]);
+                }
+            }
+        }
+    }
+    (disc.value(), taps)
 }
 
 /// Accumulator lanes of the gather run: independent partial sums that the compiler can

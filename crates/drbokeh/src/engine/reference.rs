@@ -5,7 +5,7 @@ use super::Progress;
 use crate::aperture::ApertureEval;
 use crate::image::Image;
 use crate::model::{self, Accumulator, PreparedLayer};
-use crate::presets::RenderSettings;
+use crate::presets::{Coverage, RenderSettings};
 use crate::stack::LayerStack;
 use crate::Real;
 
@@ -18,13 +18,14 @@ pub(super) fn render<T: Real>(
     let big_r = camera.window.radius_px();
     let ri = big_r as isize;
     let aperture = ApertureEval::<T>::new(&settings.aperture);
+    let tone = settings.tone();
+    let coverage_kind = settings.model().coverage;
     let layers: Vec<PreparedLayer<T>> = stack
         .layers
         .iter()
-        .map(|l| model::prepare_layer(l, camera))
+        .map(|l| model::prepare_layer(l, settings))
         .collect();
     let (w, h) = (stack.width, stack.height);
-    let (g, off) = (T::c(camera.gamma), T::c(camera.offset));
     let mut out = Image::new(w, h, 3);
     for py in 0..h {
         for px in 0..w {
@@ -56,13 +57,44 @@ pub(super) fn render<T: Real>(
                         acc.add([rgb[0], rgb[1], rgb[2]], c);
                     }
                 }
-                let half = model::coverage_half_size_px(layer.radius_px[xi], big_r);
-                let coverage = model::box_coverage(half, |dx, dy| layer.alpha[at(dx, dy)]);
+                let coverage = match coverage_kind {
+                    Coverage::PaperBox => {
+                        let half = model::coverage_half_size_px(layer.radius_px[xi], big_r);
+                        model::box_coverage(half, |dx, dy| layer.alpha[at(dx, dy)])
+                    }
+                    Coverage::SoftDisc => {
+                        let (r_x, _) = model::coverage_radius_px(
+                            layer.radius_px[xi],
+                            settings.model().coverage_radius,
+                            T::c(settings.model().footprint.px()),
+                        );
+                        let mut disc = model::DiscCoverage::default();
+                        for dy in -ri..=ri {
+                            for dx in -ri..=ri {
+                                if !model::in_window(dx, dy, big_r) {
+                                    continue; // M(x - y) = 0
+                                }
+                                let dist = ((dx * dx + dy * dy) as f64).sqrt();
+                                let gauge = settings.aperture.gauge(dx as f64, dy as f64);
+                                let s = model::scatter_term(
+                                    &aperture,
+                                    dx,
+                                    dy,
+                                    T::c(dist),
+                                    T::c(gauge),
+                                    r_x,
+                                );
+                                disc.add(s, layer.alpha[at(dx, dy)]);
+                            }
+                        }
+                        disc.value()
+                    }
+                };
                 (acc.layer_colour(), coverage)
             });
             let linear = model::composite(per_layer);
             for (c, v) in linear.into_iter().enumerate() {
-                *out.at_mut(px, py, c) = model::encode(v, g, off);
+                *out.at_mut(px, py, c) = tone.encode(v);
             }
         }
         progress.advance(1);

@@ -7,7 +7,7 @@ use super::Progress;
 use crate::aperture::ApertureEval;
 use crate::image::Image;
 use crate::model::{self, Accumulator, PreparedLayer, Tap};
-use crate::presets::RenderSettings;
+use crate::presets::{Coverage, RenderSettings};
 use crate::stack::LayerStack;
 use crate::Real;
 use rayon::prelude::*;
@@ -60,6 +60,9 @@ pub(super) struct Kernel<T> {
     pub taps: Vec<Tap>,
     pub offsets: Vec<isize>,
     pub geometry: Vec<(T, T)>,
+    pub coverage: Coverage,
+    pub coverage_radius: crate::presets::CoverageRadius,
+    pub footprint_px: T,
 }
 
 impl<T: Real> Kernel<T> {
@@ -72,6 +75,9 @@ impl<T: Real> Kernel<T> {
             offsets: taps.iter().map(|t| t.dy * stride as isize + t.dx).collect(),
             geometry: taps.iter().map(|t| (T::c(t.dist), T::c(t.gauge))).collect(),
             taps,
+            coverage: settings.model().coverage,
+            coverage_radius: settings.model().coverage_radius,
+            footprint_px: T::c(settings.model().footprint.px()),
         }
     }
 
@@ -97,12 +103,56 @@ impl<T: Real> Kernel<T> {
             };
             acc.add(layer.rgb_linear[yi], model::tap_weight(a_y, s, r_y, o));
         }
-        let half = model::coverage_half_size_px(layer.radius_px[xi], self.big_r);
-        let stride = layer.stride as isize;
-        let coverage = model::box_coverage(half, |dx, dy| {
-            layer.alpha[(xi as isize + dy * stride + dx) as usize]
-        });
-        (acc, coverage)
+        (acc, self.coverage(layer, xi))
+    }
+
+    /// The layer coverage `o(x)` at padded receiver index `xi`.
+    #[inline]
+    pub fn coverage(&self, layer: &PaddedLayer<T>, xi: usize) -> T {
+        match self.coverage {
+            Coverage::PaperBox => {
+                let half = model::coverage_half_size_px(layer.radius_px[xi], self.big_r);
+                let stride = layer.stride as isize;
+                model::box_coverage(half, |dx, dy| {
+                    layer.alpha[(xi as isize + dy * stride + dx) as usize]
+                })
+            }
+            Coverage::SoftDisc => self.disc_coverage(layer, xi, false).value(),
+        }
+    }
+
+    /// The soft-disc coverage sums at padded receiver index `xi`, in tap order; with
+    /// `derivative`, also the sums of `dS/dr(x)` (already times `dr_c/dr(x)`).
+    #[inline]
+    pub fn disc_coverage(
+        &self,
+        layer: &PaddedLayer<T>,
+        xi: usize,
+        derivative: bool,
+    ) -> model::DiscCoverage<T> {
+        let (r_x, dr) =
+            model::coverage_radius_px(layer.radius_px[xi], self.coverage_radius, self.footprint_px);
+        let mut disc = model::DiscCoverage::default();
+        for ((tap, &offset), &(dist, gauge)) in
+            self.taps.iter().zip(&self.offsets).zip(&self.geometry)
+        {
+            let a_y = layer.alpha[(xi as isize + offset) as usize];
+            if derivative {
+                let (s, ds) = model::scatter_term_with_derivative(
+                    &self.aperture,
+                    tap.dx,
+                    tap.dy,
+                    dist,
+                    gauge,
+                    r_x,
+                );
+                disc.add_with_derivative(s, ds * dr, a_y);
+            } else {
+                let s = model::scatter_term(&self.aperture, tap.dx, tap.dy, dist, gauge, r_x);
+                disc.add(s, a_y);
+            }
+        }
+        disc
     }
 }
 
@@ -115,7 +165,7 @@ pub(super) fn pad_layers<T: Real>(
     stack
         .layers
         .par_iter()
-        .map(|l| PaddedLayer::new(&model::prepare_layer(l, &settings.camera), big_r))
+        .map(|l| PaddedLayer::new(&model::prepare_layer(l, settings), big_r))
         .collect()
 }
 
@@ -129,7 +179,7 @@ pub(super) fn render<T: Real>(
     let kernel = Kernel::new(settings, stride);
     let big_r = kernel.big_r;
     let (w, h) = (stack.width, stack.height);
-    let (g, off) = (T::c(settings.camera.gamma), T::c(settings.camera.offset));
+    let tone = settings.tone();
     let mut out = Image::new(w, h, 3);
     out.data
         .par_chunks_mut(3 * w)
@@ -142,7 +192,7 @@ pub(super) fn render<T: Real>(
                     (acc.layer_colour(), coverage)
                 }));
                 for (c, v) in linear.into_iter().enumerate() {
-                    row[3 * px + c] = model::encode(v, g, off);
+                    row[3 * px + c] = tone.encode(v);
                 }
             }
             progress.advance(1);
