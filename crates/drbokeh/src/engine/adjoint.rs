@@ -544,12 +544,7 @@ impl<T: Real> Tape<T> {
                 })
             })
             .collect();
-        let mut out = vec![T::zero(); w * h];
-        for (p, v) in padded.into_iter().enumerate() {
-            let s = layer.source[p];
-            out[s] = out[s] + v;
-        }
-        out
+        fold_padded(layer, padded, w * h)
     }
 
     /// Paper coverage `o(x) = mean of alpha over a box of half-size h(x)`; each padded
@@ -600,13 +595,19 @@ impl<T: Real> Tape<T> {
                 })
             })
             .collect();
-        let mut out = vec![T::zero(); w * h];
-        for (p, v) in padded.into_iter().enumerate() {
-            let s = layer.source[p];
-            out[s] = out[s] + v;
-        }
-        out
+        fold_padded(layer, padded, w * h)
     }
+}
+
+/// Adds each padded pixel's value onto the source pixel it mirrors (fixed order, so
+/// deterministic): the adjoint of reflection padding.
+fn fold_padded<T: Real>(layer: &PaddedLayer<T>, padded: Vec<T>, pixels: usize) -> Vec<T> {
+    let mut out = vec![T::zero(); pixels];
+    for (p, v) in padded.into_iter().enumerate() {
+        let s = layer.source[p];
+        out[s] = out[s] + v;
+    }
+    out
 }
 
 /// `d|d|/dd`: the sign of `d` (0 at the kink).
