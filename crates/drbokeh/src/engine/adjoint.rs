@@ -340,12 +340,7 @@ impl<T: Real> Tape<T> {
                         let (de_dd, de_dk) = model::focus_weight_derivatives(k, d_x, e_x);
                         let (gc_rgb, gw) = (rg.d_colour_sum[i], rg.d_weight_sum[i]);
                         let (mut g_d, mut g_k) = (T::zero(), T::zero());
-                        for ((tap, &offset), &(dist, gauge)) in kernel
-                            .taps
-                            .iter()
-                            .zip(&kernel.offsets)
-                            .zip(&kernel.geometry)
-                        {
+                        for (tap, offset, dist, gauge) in kernel.taps() {
                             if offset == 0 {
                                 continue; // O(x, x) = 1
                             }
@@ -418,12 +413,7 @@ impl<T: Real> Tape<T> {
                         let inv_area = T::one() / model::area(r_y);
                         let (mut g_lin, mut g_a, mut g_r, mut g_dy) =
                             ([T::zero(); 3], T::zero(), T::zero(), T::zero());
-                        for ((tap, &offset), &(dist, gauge)) in kernel
-                            .taps
-                            .iter()
-                            .zip(&kernel.offsets)
-                            .zip(&kernel.geometry)
-                        {
+                        for (tap, offset, dist, gauge) in kernel.taps() {
                             let xp = yi as isize - offset;
                             let Some(x) = self.inner(xp, stride, big_r) else {
                                 continue;
@@ -521,12 +511,7 @@ impl<T: Real> Tape<T> {
                 (0..stride).map(move |px| {
                     let yi = py * stride + px;
                     let mut acc = T::zero();
-                    for ((tap, &offset), &(dist, gauge)) in kernel
-                        .taps
-                        .iter()
-                        .zip(&kernel.offsets)
-                        .zip(&kernel.geometry)
-                    {
+                    for (tap, offset, dist, gauge) in kernel.taps() {
                         let xp = yi as isize - offset;
                         let Some(x) = self.inner(xp, stride, big_r) else {
                             continue;

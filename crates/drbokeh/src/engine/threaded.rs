@@ -81,14 +81,22 @@ impl<T: Real> Kernel<T> {
         }
     }
 
+    /// Every masked tap with its padded-index offset, distance and gauge.
+    #[inline(always)]
+    pub fn taps(&self) -> impl Iterator<Item = (&Tap, isize, T, T)> + '_ {
+        self.taps
+            .iter()
+            .zip(&self.offsets)
+            .zip(&self.geometry)
+            .map(|((tap, &offset), &(dist, gauge))| (tap, offset, dist, gauge))
+    }
+
     /// Gathers one layer at padded receiver index `xi`: the accumulated sums and coverage.
     #[inline]
     pub fn gather(&self, layer: &PaddedLayer<T>, xi: usize) -> (Accumulator<T>, T) {
         let (d_x, e_x) = (layer.rel_disp[xi], layer.focus_weight[xi]);
         let mut acc = Accumulator::default();
-        for ((tap, &offset), &(dist, gauge)) in
-            self.taps.iter().zip(&self.offsets).zip(&self.geometry)
-        {
+        for (tap, offset, dist, gauge) in self.taps() {
             let yi = (xi as isize + offset) as usize;
             let a_y = layer.alpha[yi];
             if a_y == T::zero() {
@@ -133,9 +141,7 @@ impl<T: Real> Kernel<T> {
         let (r_x, dr) =
             model::coverage_radius_px(layer.radius_px[xi], self.coverage_radius, self.footprint_px);
         let mut disc = model::DiscCoverage::default();
-        for ((tap, &offset), &(dist, gauge)) in
-            self.taps.iter().zip(&self.offsets).zip(&self.geometry)
-        {
+        for (tap, offset, dist, gauge) in self.taps() {
             let a_y = layer.alpha[(xi as isize + offset) as usize];
             if derivative {
                 let (s, ds) = model::scatter_term_with_derivative(
