@@ -2,12 +2,12 @@
 
 mod common;
 
-use common::Rng;
+use common::{settings, Rng};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::{Coverage, CoverageRadius, Footprint, ModelOptions, Transfer};
 use drbokeh::{
     render, render_with_tape, Aperture, Engine, Image, Layer, LayerStack, NoProgress,
-    RenderSettings, Window,
+    RenderSettings,
 };
 
 /// A stack whose alpha stays in [0.1, 1] (finite differences of alpha are meaningless where
@@ -30,14 +30,6 @@ fn fd_stack(seed: u64, w: usize, h: usize, n: usize) -> LayerStack<f64> {
         })
         .collect();
     LayerStack::new(layers).unwrap()
-}
-
-fn settings(focus: f64, k: f64, window: usize, aperture: Aperture) -> RenderSettings {
-    let mut s = RenderSettings::paper(focus);
-    s.camera.blur_k = k;
-    s.camera.window = Window::from_size(window).unwrap();
-    s.aperture = aperture;
-    s
 }
 
 fn loss(stack: &LayerStack<f64>, s: &RenderSettings, weights: &Image<f64>) -> f64 {

@@ -4,20 +4,10 @@
 
 mod common;
 
-use common::random_stack;
+use common::{random_stack, settings};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::ModelOptions;
-use drbokeh::{
-    render, Aperture, Engine, Image, Layer, LayerStack, NoProgress, RenderSettings, Window,
-};
-
-fn settings(focus: f64, k: f64, window: usize, aperture: Aperture) -> RenderSettings {
-    let mut s = RenderSettings::paper(focus);
-    s.camera.blur_k = k;
-    s.camera.window = Window::from_size(window).unwrap();
-    s.aperture = aperture;
-    s
-}
+use drbokeh::{render, Aperture, Engine, Image, Layer, LayerStack, NoProgress};
 
 fn max_linear_diff<A: drbokeh::Real, B: drbokeh::Real>(
     a: &Image<A>,

@@ -3,19 +3,11 @@
 
 mod common;
 
-use common::random_stack;
+use common::{random_stack, settings};
 use drbokeh::aperture::KernelImage;
 use drbokeh::{
     render, Aperture, Engine, Image, Layer, LayerStack, NoProgress, RenderSettings, Window,
 };
-
-fn settings(focus: f64, k: f64, window: usize, aperture: Aperture) -> RenderSettings {
-    let mut s = RenderSettings::paper(focus);
-    s.camera.blur_k = k;
-    s.camera.window = Window::from_size(window).unwrap();
-    s.aperture = aperture;
-    s
-}
 
 fn apertures() -> Vec<Aperture> {
     // A ring-shaped kernel with a dark centre exercises the kernel path fully.

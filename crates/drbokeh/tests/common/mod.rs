@@ -1,7 +1,7 @@
 //! Shared test helpers: a deterministic RNG and random layer stacks.
 #![allow(dead_code)]
 
-use drbokeh::{Image, Layer, LayerStack, Real};
+use drbokeh::{Aperture, Image, Layer, LayerStack, Real, RenderSettings, Window};
 
 /// SplitMix64: tiny, deterministic, good enough for test data.
 pub struct Rng(pub u64);
@@ -61,4 +61,13 @@ pub fn random_stack<T: Real>(seed: u64, w: usize, h: usize, n: usize) -> LayerSt
         })
         .collect();
     LayerStack::new(layers).unwrap()
+}
+
+/// `paper` settings with focus, blur K, window size L and aperture.
+pub fn settings(focus: f64, k: f64, window: usize, aperture: Aperture) -> RenderSettings {
+    let mut s = RenderSettings::paper(focus);
+    s.camera.blur_k = k;
+    s.camera.window = Window::from_size(window).unwrap();
+    s.aperture = aperture;
+    s
 }
