@@ -2,13 +2,19 @@
 
 use anyhow::Result;
 use clap::Args;
-use drbokeh::bench::{run_workload, workloads, BenchRow};
+use drbokeh::bench::{
+    adjoint_workload, run_adjoint, run_workload, workloads, AdjointRow, BenchRow,
+};
 use std::path::PathBuf;
 
 /// Measure the engines on standard workloads (0.25 to 24 MP, K = 10/30/60, 1-3 layers, the
 /// demo, a uniformly blurred worst case, a 200-px blur): the fast engine against the plain
 /// multi-threaded engine (and the single-threaded reference on the demo), in one run.
 /// Prints time, taps visited, taps/s, speed-up and the largest difference in linear light.
+/// Then the adjoint at 512x512, 2 layers, K 30, L 71: fast forward, fast forward with tape,
+/// fast backward and backward/forward ratio; without --quick also the exact threaded
+/// adjoint (about a minute on 2 cores) and the largest gradient difference to it.
+/// --json writes {"rows": [...], "adjoint": {...}}.
 ///
 /// Example:
 ///   drbokeh bench --quick --json bench.json
@@ -51,6 +57,25 @@ fn print_row(r: &BenchRow) {
     );
 }
 
+fn print_adjoint(r: &AdjointRow) {
+    let opt = |v: Option<f64>, f: &dyn Fn(f64) -> String| v.map(f).unwrap_or_else(|| "-".into());
+    println!();
+    println!("| adjoint workload | forward (fast) s | forward+tape (fast) s | backward (fast) s | backward/forward | forward+tape (threaded) s | backward (threaded) s | max grad diff | max grad |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!(
+        "| {} | {:.3} | {:.3} | {:.3} | {:.2}x | {} | {} | {} | {} |",
+        r.workload,
+        r.forward_fast,
+        r.forward_tape_fast,
+        r.backward_fast,
+        r.backward_over_forward,
+        opt(r.forward_tape_threaded, &|v| format!("{v:.3}")),
+        opt(r.backward_threaded, &|v| format!("{v:.3}")),
+        opt(r.max_grad_diff, &|v| format!("{v:.2e}")),
+        opt(r.max_grad, &|v| format!("{v:.2e}")),
+    );
+}
+
 pub fn run(a: &BenchArgs) -> Result<()> {
     crate::args::init_threads(a.threads)?;
     println!("threads: {}", rayon::current_num_threads());
@@ -66,8 +91,21 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         }
         rows.extend(run_workload(&w, &mut print_row)?);
     }
+    let aw = adjoint_workload();
+    let adjoint = if a
+        .only
+        .as_ref()
+        .map_or(true, |o| aw.name.contains(o.as_str()))
+    {
+        let r = run_adjoint(&aw, !a.quick)?;
+        print_adjoint(&r);
+        Some(r)
+    } else {
+        None
+    };
     if let Some(p) = &a.json {
-        let json = serde_json::to_vec_pretty(&rows)?;
+        let json =
+            serde_json::to_vec_pretty(&serde_json::json!({ "rows": rows, "adjoint": adjoint }))?;
         drbokeh::io::write_atomic(p, |w| {
             use std::io::Write;
             w.write_all(&json)

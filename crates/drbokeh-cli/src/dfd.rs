@@ -62,6 +62,12 @@ pub struct DfdArgs {
     /// Preview PNG of the disparity (default: OUTPUT with .preview.png).
     #[arg(long, value_name = "FILE")]
     pub preview: Option<PathBuf>,
+    /// Engine of the drbokeh layer's render and gradient. auto (default) and fast: the fast
+    /// engine (only the taps that can contribute; gradients within 1e-5 of the exact ones'
+    /// largest value). threaded: every window tap, the exact gradient. reference: the
+    /// threaded adjoint.
+    #[arg(long, default_value = "auto", value_name = "ENGINE")]
+    pub engine: String,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -105,6 +111,11 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         );
     }
     let mut o = options(&a.opt, a.focus, a.blur_k)?;
+    // dfd computes in f32: auto is the fast engine (as for render).
+    o.engine = match a.engine.as_str() {
+        "auto" => drbokeh::Engine::Fast,
+        other => other.parse()?,
+    };
     let (weights, terms) = LossWeights::from_terms(&a.losses)?;
     o.weights = weights;
     o.terms = terms;

@@ -156,3 +156,64 @@ fn vjp_rejects_bad_gradients() {
     assert!(stderr(&o).contains("expected (H, W, 3)"), "{}", stderr(&o));
     assert!(!out.exists());
 }
+
+/// Without --f64, `--engine auto` runs the adjoint on the fast engine: the CLI's gradient is
+/// the library's `render_with_tape_on(.., Engine::Fast, ..)` in f32, and `--engine
+/// threaded` the exact one.
+#[test]
+fn vjp_auto_in_f32_uses_the_fast_adjoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let stack_path = dir.path().join("s.npz");
+    let stack = write_stack(&stack_path, 13, 10).cast::<f32>();
+    let g = Array3::<f32>::from_shape_fn((10, 13, 3), |(y, x, c)| {
+        ((x * 5 + y * 3 + c) % 9) as f32 / 9.0 - 0.45
+    });
+    let g_path = dir.path().join("g.npy");
+    g.write_npy(std::fs::File::create(&g_path).unwrap())
+        .unwrap();
+    let mut s = drbokeh::RenderSettings::paper(0.35);
+    s.camera.blur_k = 12.0;
+    s.camera.window = drbokeh::Window::from_size(11).unwrap();
+    let gi = drbokeh::Image::from_vec(13, 10, 3, g.iter().copied().collect()).unwrap();
+    for (engine, want_engine) in [
+        ("auto", drbokeh::Engine::Fast),
+        ("threaded", drbokeh::Engine::Threaded),
+    ] {
+        let out = dir.path().join(format!("grads-{engine}.npz"));
+        let o = drbokeh(&[
+            "vjp",
+            "--layers",
+            p(&stack_path),
+            "--grad-output",
+            p(&g_path),
+            "--focus",
+            "0.35",
+            "--blur",
+            "12",
+            "--window",
+            "11",
+            "--engine",
+            engine,
+            "--output",
+            p(&out),
+            "-q",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let mut npz = NpzReader::new(std::fs::File::open(&out).unwrap()).unwrap();
+        let alpha: Array3<f32> = npz.by_name("alpha").unwrap();
+        let disp: Array3<f32> = npz.by_name("disparity").unwrap();
+        let (_, tape) =
+            drbokeh::render_with_tape_on(&stack, &s, want_engine, &drbokeh::NoProgress).unwrap();
+        let want = tape.backward(&gi, &drbokeh::NoProgress).unwrap();
+        for l in 0..2 {
+            let layer = |a: &Array3<f32>| {
+                a.index_axis(ndarray::Axis(0), l)
+                    .iter()
+                    .copied()
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(layer(&alpha), want.layers[l].alpha.data, "{engine}");
+            assert_eq!(layer(&disp), want.layers[l].disparity.data, "{engine}");
+        }
+    }
+}

@@ -1,13 +1,11 @@
 //! Times the engines on the workloads quoted in the closing notes: the demo, and a
 //! 1024x1024 two-layer stack at the paper defaults (K = 30, L = 71), reference vs threaded;
-//! and the adjoint/forward ratio at 512x512. Ratios are measured in one run.
+//! and the adjoint at 512x512 (fast forward, tape and backward, and the exact threaded
+//! adjoint for comparison). Ratios are measured in one run.
 //!
 //! Run: `cargo run --release -p drbokeh --example timing [-- --skip-reference]`
 
-use drbokeh::{
-    demo, render, render_with_tape, Engine, Image, Layer, LayerStack, NoProgress, RenderSettings,
-    Window,
-};
+use drbokeh::{demo, render, Engine, Layer, LayerStack, NoProgress, RenderSettings, Window};
 use std::time::Instant;
 
 /// A two-layer stack: a soft-edged disc in front (disparity 0.8) of a textured background
@@ -74,14 +72,22 @@ fn main() {
         );
     }
 
-    let stack = two_layer(512);
-    let (_, t_fwd) = time(|| render(&stack, &s, Engine::Threaded, &NoProgress).unwrap());
-    let ((_, tape), t_tape) = time(|| render_with_tape(&stack, &s, &NoProgress).unwrap());
-    let g = Image::from_vec(512, 512, 3, vec![1.0f32; 512 * 512 * 3]).unwrap();
-    let (_, t_bwd) = time(|| tape.backward(&g, &NoProgress).unwrap());
+    // The adjoint at 512x512 (the workload of `drbokeh bench`): fast forward, fast forward
+    // with tape and fast backward; the exact threaded adjoint too unless --skip-reference.
+    let w = drbokeh::bench::adjoint_workload();
+    let r = drbokeh::bench::run_adjoint(&w, !skip_reference).unwrap();
     println!(
-        "512x512, 2 layers, K 30, L 71: forward {t_fwd:.2} s, forward+tape {t_tape:.2} s, backward {t_bwd:.2} s; backward/forward {:.2}x, (tape+backward)/forward {:.2}x",
-        t_bwd / t_fwd,
-        (t_tape + t_bwd) / t_fwd
+        "512x512, 2 layers, K 30, L 71: forward (fast) {:.2} s, forward+tape (fast) {:.2} s, backward (fast) {:.2} s; backward/forward {:.2}x",
+        r.forward_fast, r.forward_tape_fast, r.backward_fast, r.backward_over_forward
     );
+    if let (Some(tape), Some(bwd), Some(diff), Some(max)) = (
+        r.forward_tape_threaded,
+        r.backward_threaded,
+        r.max_grad_diff,
+        r.max_grad,
+    ) {
+        println!(
+            "  threaded (exact): forward+tape {tape:.2} s, backward {bwd:.2} s; max gradient diff {diff:.1e} (largest gradient {max:.1e})"
+        );
+    }
 }

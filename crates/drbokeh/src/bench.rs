@@ -3,6 +3,7 @@
 //! one run, with taps visited, throughput and the largest difference in linear light.
 
 use crate::demo;
+use crate::engine::adjoint::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
 use crate::presets::RenderSettings;
@@ -243,4 +244,101 @@ pub fn run_workload(w: &Workload, report: &mut dyn FnMut(&BenchRow)) -> Result<V
     }
     rows.iter().for_each(report);
     Ok(rows)
+}
+
+/// The adjoint workload: forward (fast), forward with tape and backward on the fast
+/// schedule, and (when `with_threaded`) the exact threaded adjoint for comparison.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AdjointRow {
+    /// Workload name.
+    pub workload: String,
+    /// Wall seconds of `render(.., Engine::Fast, ..)`.
+    pub forward_fast: f64,
+    /// Wall seconds of the fast forward with tape.
+    pub forward_tape_fast: f64,
+    /// Wall seconds of the fast backward.
+    pub backward_fast: f64,
+    /// `backward_fast / forward_fast`.
+    pub backward_over_forward: f64,
+    /// Wall seconds of the threaded forward with tape, if measured.
+    pub forward_tape_threaded: Option<f64>,
+    /// Wall seconds of the threaded (exact) backward, if measured.
+    pub backward_threaded: Option<f64>,
+    /// Largest absolute difference between the fast and threaded gradients (all layers and
+    /// kinds), if measured.
+    pub max_grad_diff: Option<f64>,
+    /// Largest absolute threaded gradient, the scale of `max_grad_diff`, if measured.
+    pub max_grad: Option<f64>,
+}
+
+/// The adjoint workload: 512x512, 2 layers, K 30, L 71 ([`two_layer`]), upstream gradient
+/// a fixed pseudo-random field in [-1, 1].
+pub fn adjoint_workload() -> Workload {
+    Workload {
+        name: "adjoint-0.25MP-2L-K30-L71".into(),
+        stack: two_layer(512, 512),
+        settings: settings(0.5, 30.0, Window::from_size(71).expect("valid window")),
+        compare: vec![Engine::Threaded],
+    }
+}
+
+/// Runs the adjoint workload; the threaded adjoint (a minute on 2 cores) only if
+/// `with_threaded`.
+pub fn run_adjoint(w: &Workload, with_threaded: bool) -> Result<AdjointRow> {
+    let (width, height) = (w.stack.width, w.stack.height);
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let g: Vec<f32> = (0..width * height * 3)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+        })
+        .collect();
+    let g = Image::from_vec(width, height, 3, g)?;
+    let t = Instant::now();
+    render_with_stats(&w.stack, &w.settings, Engine::Fast, &NoProgress)?;
+    let forward_fast = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (_, tape) = render_with_tape_on(&w.stack, &w.settings, Engine::Fast, &NoProgress)?;
+    let forward_tape_fast = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let fast = tape.backward(&g, &NoProgress)?;
+    let backward_fast = t.elapsed().as_secs_f64();
+    drop(tape);
+    let mut row = AdjointRow {
+        workload: w.name.clone(),
+        forward_fast,
+        forward_tape_fast,
+        backward_fast,
+        backward_over_forward: backward_fast / forward_fast,
+        forward_tape_threaded: None,
+        backward_threaded: None,
+        max_grad_diff: None,
+        max_grad: None,
+    };
+    if with_threaded {
+        let t = Instant::now();
+        let (_, tape) = render_with_tape_on(&w.stack, &w.settings, Engine::Threaded, &NoProgress)?;
+        row.forward_tape_threaded = Some(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let exact = tape.backward(&g, &NoProgress)?;
+        row.backward_threaded = Some(t.elapsed().as_secs_f64());
+        let (mut diff, mut max) = (0.0f64, 0.0f64);
+        for (a, b) in exact.layers.iter().zip(&fast.layers) {
+            for (x, y) in [
+                (&a.rgb, &b.rgb),
+                (&a.alpha, &b.alpha),
+                (&a.disparity, &b.disparity),
+            ] {
+                for (p, q) in x.data.iter().zip(&y.data) {
+                    diff = diff.max((*p as f64 - *q as f64).abs());
+                    max = max.max((*p as f64).abs());
+                }
+            }
+        }
+        row.max_grad_diff = Some(diff);
+        row.max_grad = Some(max);
+    }
+    Ok(row)
 }

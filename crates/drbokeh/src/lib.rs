@@ -34,7 +34,7 @@ pub mod trace;
 
 pub use aperture::Aperture;
 pub use camera::{Camera, Window};
-pub use engine::adjoint::{render_with_tape, Gradients, LayerGradients, Tape};
+pub use engine::adjoint::{render_with_tape, render_with_tape_on, Gradients, LayerGradients, Tape};
 pub use engine::{render, render_with_stats, Engine, NoProgress, Progress, RenderStats};
 pub use error::{Error, Result};
 pub use image::Image;

@@ -106,6 +106,15 @@ pub fn depth_step_derivative<T: Real>(disp_difference: T) -> T {
     T::c(5.0) * (T::one() - t * t)
 }
 
+/// Derivative of [`depth_step`] from its value `s`: `20 s (1 - s)`. Since
+/// `s = 1/2 + 1/2 tanh(u)` gives `1 - tanh^2(u) = 4 s (1 - s)`, this equals
+/// [`depth_step_derivative`]; with [`depth_step_fast`] it is the fast engine's form (no
+/// second transcendental).
+#[inline(always)]
+pub fn depth_step_derivative_from_value<T: Real>(s: T) -> T {
+    T::c(20.0) * s * (T::one() - s)
+}
+
 /// Soft occlusion `O(y,x) = 1 + e(x) (s(d(y) - d(x)) - 1)` (supplement eq. 1 with its sign
 /// slip corrected); the centre tap has `O(x,x) = 1`, which callers handle.
 #[inline(always)]
@@ -590,5 +599,25 @@ pub fn prepare_layer<T: Real>(layer: &Layer<T>, settings: &RenderSettings) -> Pr
             .collect(),
         focus_weight: rel_disp.iter().map(|&d| focus_weight(k, d)).collect(),
         rel_disp,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_step_derivative_from_value_agrees_with_the_exact_one() {
+        let mut worst = 0.0f64;
+        for i in -2000..=2000 {
+            let diff = i as f64 * 5e-4;
+            let exact = depth_step_derivative(diff);
+            let from_exact_value = depth_step_derivative_from_value(depth_step(diff));
+            let fast32 = depth_step_derivative_from_value(depth_step_fast(diff as f32)) as f64;
+            assert!((from_exact_value - exact).abs() <= 1e-12, "{diff}");
+            worst = worst.max((fast32 - exact).abs());
+        }
+        // f32 with the polynomial exp: within a few f32 ulps of the peak value 5.
+        assert!(worst < 5e-6, "worst {worst}");
     }
 }

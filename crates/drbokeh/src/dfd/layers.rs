@@ -124,9 +124,30 @@ pub fn render_layer<T: Real>(
 }
 
 /// Renders and back-propagates: returns the render and the gradient of `sum(G * render)`
-/// with respect to the disparity, where `upstream(render)` returns `G`.
+/// with respect to the disparity, where `upstream(render)` returns `G`. The Dr.Bokeh layer
+/// runs on the threaded engine (the exact gradient); see [`render_layer_vjp_on`].
 pub fn render_layer_vjp<T: Real>(
     layer: RenderLayer,
+    aif: &Image<T>,
+    disparity: &Image<T>,
+    settings: &RenderSettings,
+    upstream: impl FnOnce(&Image<T>) -> Result<Image<T>>,
+) -> Result<(Image<T>, Image<T>)> {
+    render_layer_vjp_on(
+        layer,
+        crate::Engine::Threaded,
+        aif,
+        disparity,
+        settings,
+        upstream,
+    )
+}
+
+/// [`render_layer_vjp`] with the Dr.Bokeh layer's forward and adjoint on `engine`
+/// ([`crate::render_with_tape_on`]; the other layers ignore it).
+pub fn render_layer_vjp_on<T: Real>(
+    layer: RenderLayer,
+    engine: crate::Engine,
     aif: &Image<T>,
     disparity: &Image<T>,
     settings: &RenderSettings,
@@ -136,7 +157,7 @@ pub fn render_layer_vjp<T: Real>(
     match layer {
         RenderLayer::DrBokeh => {
             let stack = LayerStack::single(aif.clone(), disparity.clone())?;
-            let (out, tape) = crate::render_with_tape(&stack, settings, &NoProgress)?;
+            let (out, tape) = crate::render_with_tape_on(&stack, settings, engine, &NoProgress)?;
             let g = upstream(&out)?;
             let grads = tape.backward(&g, &NoProgress)?;
             Ok((out, grads.layers.into_iter().next().unwrap().disparity))

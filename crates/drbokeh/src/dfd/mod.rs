@@ -12,7 +12,7 @@
 pub mod experiment;
 pub mod layers;
 
-pub use layers::{render_layer, render_layer_vjp, RenderLayer};
+pub use layers::{render_layer, render_layer_vjp, render_layer_vjp_on, RenderLayer};
 
 use crate::camera::Window;
 use crate::image::Image;
@@ -108,6 +108,9 @@ pub struct DfdOptions {
     pub scales: usize,
     /// Initial disparity everywhere.
     pub init: f64,
+    /// Engine of the Dr.Bokeh layer's forward and adjoint ([`crate::render_with_tape_on`]);
+    /// default [`crate::Engine::Threaded`] (the exact gradient).
+    pub engine: crate::Engine,
 }
 
 impl DfdOptions {
@@ -123,6 +126,7 @@ impl DfdOptions {
             learning_rate: 0.02,
             scales: 2,
             init: 0.5,
+            engine: crate::Engine::Threaded,
         }
     }
 }
@@ -233,8 +237,9 @@ pub fn estimate_disparity<T: Real>(
             };
             let weights = options.weights;
             let terms = options.terms;
-            let (_, mut grad) = render_layer_vjp(
+            let (_, mut grad) = render_layer_vjp_on(
                 options.layer,
+                options.engine,
                 aif,
                 &disparity,
                 &settings,

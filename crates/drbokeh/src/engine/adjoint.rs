@@ -2,10 +2,20 @@
 //! loss with respect to every layer's colour, alpha and disparity, and to the camera's
 //! blur strength K and focus disparity f.
 //!
-//! Forward and backward share the threaded engine's padded planes and the model's terms
-//! ([`crate::model`], each soft term beside its derivative). The backward pass is a
-//! *gather*: every output element is written by exactly one task, so it is race-free and
-//! deterministic for any thread count.
+//! Two schedules ([`render_with_tape_on`]):
+//! - [`Engine::Threaded`] (also [`Engine::Reference`], and [`render_with_tape`]): this
+//!   module, the exact adjoint. Forward and backward share the threaded engine's padded
+//!   planes and visit every tap of the full `L x L` window in every pass; the output is the
+//!   threaded render, bit for bit.
+//! - [`Engine::Fast`]: `engine/fast_adjoint.rs`, the fast engine's schedule (tiles bounded
+//!   by the blur radii that reach them, the soft step's far tail dropped, vectorised runs);
+//!   the output is the fast render, bit for bit, and the gradients agree with the exact
+//!   ones to 1e-5 of their largest value (tested; typically 1e-6). At 512x512, 2 layers,
+//!   K 30, L 71 its backward takes about 2x the fast forward (seconds, against minutes).
+//!
+//! Both use the model's terms ([`crate::model`], each soft term beside its derivative).
+//! The backward pass is a *gather*: every output element is written by exactly one task,
+//! so it is race-free and deterministic for any thread count.
 //!
 //! Chain (per layer, receiver x, source y; see the spec's "Differentiability"):
 //! - tone: `dout/dlin = (1/g) lin^(1/g - 1)`;
@@ -26,7 +36,7 @@
 //! gradients are folded back onto their mirrored source pixels in a fixed order.
 
 use super::threaded::{pad_layers, Kernel, PaddedLayer};
-use super::Progress;
+use super::{Engine, Progress};
 use crate::image::Image;
 use crate::model;
 use crate::presets::{Coverage, RenderSettings};
@@ -35,18 +45,32 @@ use crate::{Error, Real, Result};
 use rayon::prelude::*;
 
 /// Per-layer, per-pixel sums saved by the forward pass.
-#[derive(Clone, Copy, Debug)]
-struct Saved<T> {
-    weight: T,
-    colour: [T; 3],
-    coverage: T,
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Saved<T> {
+    /// Weight sum `W`.
+    pub weight: T,
+    /// Layer colour `B = C / (W + 1e-8)`.
+    pub colour: [T; 3],
+    /// Layer coverage `o`.
+    pub coverage: T,
 }
 
 /// One pixel of the recorded forward pass: per-layer sums and the linear composite.
 type PixelRecord<T> = (Vec<Saved<T>>, [T; 3]);
 
-/// Everything the backward pass needs, recorded by [`render_with_tape`].
+/// Everything the backward pass needs, recorded by [`render_with_tape`] or
+/// [`render_with_tape_on`].
 pub struct Tape<T> {
+    inner: TapeInner<T>,
+}
+
+enum TapeInner<T> {
+    Threaded(ThreadedTape<T>),
+    Fast(super::fast_adjoint::FastTape<T>),
+}
+
+/// The threaded (exact, every window tap) schedule's tape.
+struct ThreadedTape<T> {
     settings: RenderSettings,
     width: usize,
     height: usize,
@@ -84,18 +108,98 @@ pub struct Gradients<T> {
 }
 
 /// Renders like [`crate::render`] with the threaded engine (bit-identical output) and
-/// records what [`Tape::backward`] needs.
+/// records what [`Tape::backward`] needs: the exact adjoint, every window tap
+/// (`render_with_tape_on(.., Engine::Threaded, ..)`).
 pub fn render_with_tape<T: Real>(
     stack: &LayerStack<T>,
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Result<(Image<T>, Tape<T>)> {
+    render_with_tape_on(stack, settings, Engine::Threaded, progress)
+}
+
+/// Renders with the chosen engine and records what [`Tape::backward`] needs.
+///
+/// - [`Engine::Reference`] and [`Engine::Threaded`]: the exact adjoint on the threaded
+///   schedule (every window tap); the output is the threaded render, bit for bit.
+/// - [`Engine::Fast`]: forward and backward on the fast engine's schedule (tiles bounded by
+///   the blur radii that reach them, the soft step's tail beyond `r + 4.5` px dropped; see
+///   `engine/fast_adjoint.rs`); the output is `render(.., Engine::Fast, ..)`, bit for bit,
+///   and the gradients agree with the exact adjoint to about 1e-6 of their largest value.
+pub fn render_with_tape_on<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    engine: Engine,
+    progress: &dyn Progress,
+) -> Result<(Image<T>, Tape<T>)> {
     stack.validate()?;
     settings.validate()?;
     progress.start(stack.height as u64);
+    match engine {
+        Engine::Reference | Engine::Threaded => {
+            let (img, tape) = threaded_with_tape(stack, settings, progress);
+            Ok((
+                img,
+                Tape {
+                    inner: TapeInner::Threaded(tape),
+                },
+            ))
+        }
+        Engine::Fast => {
+            let (img, tape) = super::fast_adjoint::render_with_tape(stack, settings, progress);
+            Ok((
+                img,
+                Tape {
+                    inner: TapeInner::Fast(tape),
+                },
+            ))
+        }
+    }
+}
+
+/// Per layer, per source pixel: `dlin/dI` and `dlin/dd` for each channel (highlight boost
+/// and display transfer, [`model::source_linear_with_derivatives`]).
+#[allow(clippy::type_complexity)]
+pub(super) fn source_derivatives<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+) -> (Vec<Vec<[T; 3]>>, Vec<Vec<[T; 3]>>) {
     let cam = &settings.camera;
     let tone = settings.tone();
     let f = T::c(cam.focus_disparity);
+    let (w, h) = (stack.width, stack.height);
+    let (mut dlin_dencoded, mut dlin_ddisp) = (Vec::new(), Vec::new());
+    for layer in &stack.layers {
+        let (mut di, mut dd) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
+        for (px, &disp) in layer
+            .rgb_encoded
+            .data
+            .chunks_exact(3)
+            .zip(&layer.disparity.data)
+        {
+            let d = model::relative_disparity(disp, f);
+            let (mut a, mut b) = ([T::zero(); 3], [T::zero(); 3]);
+            for c in 0..3 {
+                let (_, x, y) =
+                    model::source_linear_with_derivatives(px[c], d, cam.highlight, &tone);
+                a[c] = x;
+                b[c] = y;
+            }
+            di.push(a);
+            dd.push(b);
+        }
+        dlin_dencoded.push(di);
+        dlin_ddisp.push(dd);
+    }
+    (dlin_dencoded, dlin_ddisp)
+}
+
+fn threaded_with_tape<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> (Image<T>, ThreadedTape<T>) {
+    let tone = settings.tone();
     let layers = pad_layers(stack, settings);
     let stride = layers[0].stride;
     let kernel = Kernel::new(settings, stride);
@@ -136,32 +240,10 @@ pub fn render_with_tape<T: Real>(
         saved.push(s);
         linear.push(lin);
     }
-    let (mut dlin_dencoded, mut dlin_ddisp) = (Vec::new(), Vec::new());
-    for layer in &stack.layers {
-        let (mut di, mut dd) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
-        for (px, &disp) in layer
-            .rgb_encoded
-            .data
-            .chunks_exact(3)
-            .zip(&layer.disparity.data)
-        {
-            let d = model::relative_disparity(disp, f);
-            let (mut a, mut b) = ([T::zero(); 3], [T::zero(); 3]);
-            for c in 0..3 {
-                let (_, x, y) =
-                    model::source_linear_with_derivatives(px[c], d, cam.highlight, &tone);
-                a[c] = x;
-                b[c] = y;
-            }
-            di.push(a);
-            dd.push(b);
-        }
-        dlin_dencoded.push(di);
-        dlin_ddisp.push(dd);
-    }
-    Ok((
+    let (dlin_dencoded, dlin_ddisp) = source_derivatives(stack, settings);
+    (
         out,
-        Tape {
+        ThreadedTape {
             settings: settings.clone(),
             width: w,
             height: h,
@@ -171,20 +253,144 @@ pub fn render_with_tape<T: Real>(
             saved,
             linear,
         },
-    ))
+    )
 }
 
 /// Upstream gradients of one layer at each receiver: `dL/dC` (3), `dL/dW`, `dL/do`.
-struct ReceiverGrads<T> {
-    d_colour_sum: Vec<[T; 3]>,
-    d_weight_sum: Vec<T>,
-    d_coverage: Vec<T>,
+pub(super) struct ReceiverGrads<T> {
+    /// `dL/dC(x)` per channel.
+    pub d_colour_sum: Vec<[T; 3]>,
+    /// `dL/dW(x)`.
+    pub d_weight_sum: Vec<T>,
+    /// `dL/do(x)`.
+    pub d_coverage: Vec<T>,
+}
+
+/// Checks that `grad_output` is finite and shaped like a `w x h` RGB render.
+pub(super) fn check_grad_output<T: Real>(grad_output: &Image<T>, w: usize, h: usize) -> Result<()> {
+    if grad_output.width != w || grad_output.height != h || grad_output.channels != 3 {
+        return Err(Error::input(
+            "output gradient",
+            format!(
+                "is {}x{}x{}, but the render is {w}x{h}x3",
+                grad_output.width, grad_output.height, grad_output.channels
+            ),
+        ));
+    }
+    grad_output.check_finite("output gradient")
+}
+
+/// Tone and compositing backward: per layer, the receiver gradients `dL/dC`, `dL/dW`,
+/// `dL/do`, from the recorded per-layer sums (`saved(pixel, layer)`) and linear composite.
+pub(super) fn receiver_gradients<T: Real>(
+    n_layers: usize,
+    saved: impl Fn(usize, usize) -> Saved<T> + Sync,
+    linear: &[[T; 3]],
+    grad_output: &Image<T>,
+    tone: &model::Tone,
+) -> Vec<ReceiverGrads<T>> {
+    let eps = T::c(model::WEIGHT_EPSILON);
+    let per_pixel: Vec<Vec<([T; 3], T, T)>> = (0..linear.len())
+        .into_par_iter()
+        .map(|i| {
+            let saved: Vec<Saved<T>> = (0..n_layers).map(|l| saved(i, l)).collect();
+            let mut g_lin = [T::zero(); 3];
+            for c in 0..3 {
+                g_lin[c] = grad_output.data[3 * i + c] * tone.encode_derivative(linear[i][c]);
+            }
+            // U_l from the back.
+            let mut behind = vec![[T::zero(); 3]; n_layers + 1];
+            for l in (0..n_layers).rev() {
+                let s = &saved[l];
+                for c in 0..3 {
+                    behind[l][c] =
+                        s.colour[c] * s.coverage + (T::one() - s.coverage) * behind[l + 1][c];
+                }
+            }
+            let mut g_u = g_lin;
+            (0..n_layers)
+                .map(|l| {
+                    let s = &saved[l];
+                    let mut g_b = [T::zero(); 3];
+                    let mut g_o = T::zero();
+                    for c in 0..3 {
+                        g_b[c] = g_u[c] * s.coverage;
+                        g_o = g_o + g_u[c] * (s.colour[c] - behind[l + 1][c]);
+                        g_u[c] = g_u[c] * (T::one() - s.coverage);
+                    }
+                    // B = C / (W + eps): dL/dC = gB / (W + eps), dL/dW = -sum gB B / (W + eps).
+                    let inv = T::one() / (s.weight + eps);
+                    let g_c = g_b.map(|v| v * inv);
+                    let g_w =
+                        -(g_b[0] * s.colour[0] + g_b[1] * s.colour[1] + g_b[2] * s.colour[2]) * inv;
+                    (g_c, g_w, g_o)
+                })
+                .collect()
+        })
+        .collect();
+    (0..n_layers)
+        .map(|l| ReceiverGrads {
+            d_colour_sum: per_pixel.iter().map(|p| p[l].0).collect(),
+            d_weight_sum: per_pixel.iter().map(|p| p[l].1).collect(),
+            d_coverage: per_pixel.iter().map(|p| p[l].2).collect(),
+        })
+        .collect()
+}
+
+/// One layer's input gradients from the gradients reaching its linear colour, alpha and
+/// relative disparity (chain through `dlin/dI` and `dlin/dd`).
+pub(super) fn layer_gradients<T: Real>(
+    (w, h): (usize, usize),
+    g_lin: &[[T; 3]],
+    g_alpha: impl Fn(usize) -> T,
+    g_disp: impl Fn(usize) -> T,
+    dlin_dencoded: &[[T; 3]],
+    dlin_ddisp: &[[T; 3]],
+) -> LayerGradients<T> {
+    let mut rgb = Image::new(w, h, 3);
+    let mut alpha = Image::new(w, h, 1);
+    let mut disparity = Image::new(w, h, 1);
+    for i in 0..w * h {
+        let mut g_d = g_disp(i);
+        for c in 0..3 {
+            rgb.data[3 * i + c] = g_lin[i][c] * dlin_dencoded[i][c];
+            g_d = g_d + g_lin[i][c] * dlin_ddisp[i][c];
+        }
+        alpha.data[i] = g_alpha(i);
+        disparity.data[i] = g_d;
+    }
+    LayerGradients {
+        rgb,
+        alpha,
+        disparity,
+    }
+}
+
+/// Every `d = disp - f`: `dL/df = -sum dL/d disp`.
+pub(super) fn focus_gradient<T: Real>(layers: &[LayerGradients<T>]) -> f64 {
+    -layers
+        .iter()
+        .flat_map(|l| l.disparity.data.iter())
+        .map(|v| v.f64())
+        .sum::<f64>()
 }
 
 impl<T: Real> Tape<T> {
     /// The settings this tape was recorded with.
     pub fn settings(&self) -> &RenderSettings {
-        &self.settings
+        match &self.inner {
+            TapeInner::Threaded(t) => &t.settings,
+            TapeInner::Fast(t) => t.settings(),
+        }
+    }
+
+    /// The schedule the backward pass runs on: [`Engine::Threaded`] (exact) or
+    /// [`Engine::Fast`].
+    pub fn engine(&self) -> Engine {
+        match &self.inner {
+            TapeInner::Threaded(_) => Engine::Threaded,
+            TapeInner::Fast(_) => Engine::Fast,
+        }
     }
 
     /// Back-propagates `grad_output` (d loss / d output, shaped like the rendered image)
@@ -194,110 +400,56 @@ impl<T: Real> Tape<T> {
         grad_output: &Image<T>,
         progress: &dyn Progress,
     ) -> Result<Gradients<T>> {
-        let (w, h) = (self.width, self.height);
-        if grad_output.width != w || grad_output.height != h || grad_output.channels != 3 {
-            return Err(Error::input(
-                "output gradient",
-                format!(
-                    "is {}x{}x{}, but the render is {w}x{h}x3",
-                    grad_output.width, grad_output.height, grad_output.channels
-                ),
-            ));
+        match &self.inner {
+            TapeInner::Threaded(t) => t.backward(grad_output, progress),
+            TapeInner::Fast(t) => t.backward(grad_output, progress),
         }
-        grad_output.check_finite("output gradient")?;
+    }
+}
+
+impl<T: Real> ThreadedTape<T> {
+    fn backward(&self, grad_output: &Image<T>, progress: &dyn Progress) -> Result<Gradients<T>> {
+        let (w, h) = (self.width, self.height);
+        check_grad_output(grad_output, w, h)?;
         let n_layers = self.layers.len();
         let tone = self.settings.tone();
-        let eps = T::c(model::WEIGHT_EPSILON);
         progress.start((n_layers * 3) as u64 + 1);
 
-        // Tone and compositing: per pixel, per layer receiver gradients.
-        let per_pixel: Vec<Vec<([T; 3], T, T)>> = (0..w * h)
-            .into_par_iter()
-            .map(|i| {
-                let saved = &self.saved[i];
-                let mut g_lin = [T::zero(); 3];
-                for c in 0..3 {
-                    g_lin[c] =
-                        grad_output.data[3 * i + c] * tone.encode_derivative(self.linear[i][c]);
-                }
-                // U_l from the back.
-                let mut behind = vec![[T::zero(); 3]; n_layers + 1];
-                for l in (0..n_layers).rev() {
-                    let s = &saved[l];
-                    for c in 0..3 {
-                        behind[l][c] =
-                            s.colour[c] * s.coverage + (T::one() - s.coverage) * behind[l + 1][c];
-                    }
-                }
-                let mut g_u = g_lin;
-                (0..n_layers)
-                    .map(|l| {
-                        let s = &saved[l];
-                        let mut g_b = [T::zero(); 3];
-                        let mut g_o = T::zero();
-                        for c in 0..3 {
-                            g_b[c] = g_u[c] * s.coverage;
-                            g_o = g_o + g_u[c] * (s.colour[c] - behind[l + 1][c]);
-                            g_u[c] = g_u[c] * (T::one() - s.coverage);
-                        }
-                        // B = C / (W + eps): dL/dC = gB / (W + eps), dL/dW = -sum gB B / (W + eps).
-                        let inv = T::one() / (s.weight + eps);
-                        let g_c = g_b.map(|v| v * inv);
-                        let g_w =
-                            -(g_b[0] * s.colour[0] + g_b[1] * s.colour[1] + g_b[2] * s.colour[2])
-                                * inv;
-                        (g_c, g_w, g_o)
-                    })
-                    .collect()
-            })
-            .collect();
+        // Tone and compositing: per layer, per pixel receiver gradients.
+        let receivers = receiver_gradients(
+            n_layers,
+            |i, l| self.saved[i][l],
+            &self.linear,
+            grad_output,
+            &tone,
+        );
         progress.advance(1);
 
         let cam = &self.settings.camera;
         let k = T::c(cam.blur_k);
         let mut blur_k = 0.0f64;
         let mut layers_out = Vec::with_capacity(n_layers);
-        for l in 0..n_layers {
-            let rg = ReceiverGrads {
-                d_colour_sum: per_pixel.iter().map(|p| p[l].0).collect(),
-                d_weight_sum: per_pixel.iter().map(|p| p[l].1).collect(),
-                d_coverage: per_pixel.iter().map(|p| p[l].2).collect(),
-            };
+        for (l, rg) in receivers.iter().enumerate() {
             let layer = &self.layers[l];
             let kernel = Kernel::new(&self.settings, layer.stride);
-            let (g_disp_receiver, k_a) = self.pass_receivers(layer, &kernel, &rg, k);
+            let (g_disp_receiver, k_a) = self.pass_receivers(layer, &kernel, rg, k);
             progress.advance(1);
             let (g_lin, g_alpha_scatter, g_disp_source, k_b) =
-                self.pass_sources(layer, &kernel, &rg, k);
+                self.pass_sources(layer, &kernel, rg, k);
             progress.advance(1);
-            let g_alpha_cov = self.pass_coverage(layer, &kernel, &rg);
+            let g_alpha_cov = self.pass_coverage(layer, &kernel, rg);
             progress.advance(1);
             blur_k += k_a + k_b;
-
-            let mut rgb = Image::new(w, h, 3);
-            let mut alpha = Image::new(w, h, 1);
-            let mut disparity = Image::new(w, h, 1);
-            for i in 0..w * h {
-                let mut g_d = g_disp_receiver[i] + g_disp_source[i];
-                for c in 0..3 {
-                    rgb.data[3 * i + c] = g_lin[i][c] * self.dlin_dencoded[l][i][c];
-                    g_d = g_d + g_lin[i][c] * self.dlin_ddisp[l][i][c];
-                }
-                alpha.data[i] = g_alpha_scatter[i] + g_alpha_cov[i];
-                disparity.data[i] = g_d;
-            }
-            layers_out.push(LayerGradients {
-                rgb,
-                alpha,
-                disparity,
-            });
+            layers_out.push(layer_gradients(
+                (w, h),
+                &g_lin,
+                |i| g_alpha_scatter[i] + g_alpha_cov[i],
+                |i| g_disp_receiver[i] + g_disp_source[i],
+                &self.dlin_dencoded[l],
+                &self.dlin_ddisp[l],
+            ));
         }
-        // Every d = disp - f: dL/df = -sum dL/d disp.
-        let focus = -layers_out
-            .iter()
-            .flat_map(|l| l.disparity.data.iter())
-            .map(|v| v.f64())
-            .sum::<f64>();
+        let focus = focus_gradient(&layers_out);
         Ok(Gradients {
             layers: layers_out,
             blur_k,

@@ -26,6 +26,7 @@
 //! 1e-5), and is identical for any thread count (each pixel is computed by one task in a
 //! fixed order).
 
+use super::adjoint::Saved;
 use super::Progress;
 use crate::aperture::ApertureEval;
 use crate::image::Image;
@@ -42,7 +43,7 @@ pub const TILE: usize = 32;
 /// Receiver rows per tile.
 pub const TILE_ROWS: usize = 16;
 /// Rows per block of the per-column radius maxima.
-const ROW_BLOCK: usize = 8;
+pub(super) const ROW_BLOCK: usize = 8;
 /// Receivers with a focus weight below this treat the occlusion term as exactly 1.
 pub const FOCUS_WEIGHT_CUTOFF: f64 = 1e-9;
 
@@ -124,14 +125,14 @@ impl<T: Real> BandLayer<T> {
 }
 
 /// Per-window tables: for each row `dy`, the gauge of every `dx` (`-R..=R`).
-struct WindowTables<T> {
-    big_r: usize,
-    gauge: Vec<Vec<T>>,
-    dist: Vec<Vec<f64>>,
+pub(super) struct WindowTables<T> {
+    pub big_r: usize,
+    pub gauge: Vec<Vec<T>>,
+    pub dist: Vec<Vec<f64>>,
 }
 
 impl<T: Real> WindowTables<T> {
-    fn new(settings: &RenderSettings) -> Self {
+    pub fn new(settings: &RenderSettings) -> Self {
         let big_r = settings.camera.window.radius_px();
         let r = big_r as isize;
         let rows = (-r..=r)
@@ -150,7 +151,7 @@ impl<T: Real> WindowTables<T> {
 
     /// For row `dy`, the largest `|dx|` with `M = 1` (`dist < R`) and `dist <= reach`;
     /// `None` if no tap of the row qualifies.
-    fn half_width(&self, dy: isize, reach: f64) -> Option<usize> {
+    pub fn half_width(&self, dy: isize, reach: f64) -> Option<usize> {
         let row = &self.dist[(dy + self.big_r as isize) as usize];
         let r = self.big_r as f64;
         (0..=self.big_r).rev().find(|&dx| {
@@ -166,13 +167,34 @@ pub(super) fn render<T: Real>(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> (Image<T>, u64) {
+    let (img, taps, _) = render_recording(stack, settings, progress, false);
+    (img, taps)
+}
+
+/// What the fast adjoint needs from the forward pass ([`render_recording`]).
+pub(super) struct Recording<T> {
+    /// Per layer, per pixel: the weight sum `W`, layer colour `B` and coverage `o`.
+    pub saved: Vec<Vec<Saved<T>>>,
+    /// The linear composite per pixel (before encoding).
+    pub linear: Vec<[T; 3]>,
+}
+
+/// [`render`], and with `record` also the per-layer sums of every pixel (the same values
+/// the composite used, so a render with or without recording gives identical bytes).
+pub(super) fn render_recording<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    record: bool,
+) -> (Image<T>, u64, Option<Recording<T>>) {
     let (w, h) = (stack.width, stack.height);
     let tables = WindowTables::<T>::new(settings);
     let band_rows = BAND_ROWS.max(2 * tables.big_r);
     let aperture = ApertureEval::<T>::new(&settings.aperture);
     let tone = settings.tone();
     let mut out = Image::new(w, h, 3);
-    let taps: u64 = out
+    type BandRecord<T> = (Vec<Vec<Saved<T>>>, Vec<[T; 3]>);
+    let bands: Vec<(u64, Option<BandRecord<T>>)> = out
         .data
         .par_chunks_mut(3 * w * band_rows)
         .enumerate()
@@ -182,8 +204,14 @@ pub(super) fn render<T: Real>(
             let mut taps = 0;
             let mut linear = vec![[T::zero(); 3]; (y1 - y0) * w];
             let mut transmittance = vec![T::one(); (y1 - y0) * w];
+            let mut saved = Vec::new();
             for layer in &stack.layers {
                 let b = BandLayer::new(layer, settings, y0, y1, tables.big_r);
+                let mut layer_saved = if record {
+                    vec![Saved::default(); (y1 - y0) * w]
+                } else {
+                    Vec::new()
+                };
                 taps += render_band_layer_dispatch(
                     &b,
                     settings,
@@ -192,7 +220,9 @@ pub(super) fn render<T: Real>(
                     (y1 - y0, w),
                     &mut linear,
                     &mut transmittance,
+                    &mut layer_saved,
                 );
+                saved.push(layer_saved);
             }
             for (i, lin) in linear.iter().enumerate() {
                 for c in 0..3 {
@@ -200,15 +230,33 @@ pub(super) fn render<T: Real>(
                 }
             }
             progress.advance((y1 - y0) as u64);
-            taps
+            (taps, record.then_some((saved, linear)))
         })
-        .sum();
-    (out, taps)
+        .collect();
+    let taps = bands.iter().map(|b| b.0).sum();
+    let recording = record.then(|| {
+        let mut rec = Recording {
+            saved: (0..stack.layers.len())
+                .map(|_| Vec::with_capacity(w * h))
+                .collect(),
+            linear: Vec::with_capacity(w * h),
+        };
+        for (_, band) in bands.into_iter() {
+            let (saved, linear) = band.expect("recorded");
+            for (all, s) in rec.saved.iter_mut().zip(saved) {
+                all.extend(s);
+            }
+            rec.linear.extend(linear);
+        }
+        rec
+    });
+    (out, taps, recording)
 }
 
 /// Calls [`render_band_layer`] compiled for AVX2 when the CPU has it (same arithmetic in
 /// the same order, so the same bytes; only the vector width differs), else for the
 /// baseline target.
+#[allow(clippy::too_many_arguments)]
 fn render_band_layer_dispatch<T: Real>(
     b: &BandLayer<T>,
     settings: &RenderSettings,
@@ -217,22 +265,42 @@ fn render_band_layer_dispatch<T: Real>(
     size: (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [Saved<T>],
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe {
-                render_band_layer_avx2(b, settings, tables, aperture, size, linear, transmittance)
+                render_band_layer_avx2(
+                    b,
+                    settings,
+                    tables,
+                    aperture,
+                    size,
+                    linear,
+                    transmittance,
+                    saved,
+                )
             };
         }
     }
-    render_band_layer(b, settings, tables, aperture, size, linear, transmittance)
+    render_band_layer(
+        b,
+        settings,
+        tables,
+        aperture,
+        size,
+        linear,
+        transmittance,
+        saved,
+    )
 }
 
 /// [`render_band_layer`] compiled with AVX2 enabled.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn render_band_layer_avx2<T: Real>(
     b: &BandLayer<T>,
     settings: &RenderSettings,
@@ -241,13 +309,24 @@ unsafe fn render_band_layer_avx2<T: Real>(
     size: (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [Saved<T>],
 ) -> u64 {
-    render_band_layer(b, settings, tables, aperture, size, linear, transmittance)
+    render_band_layer(
+        b,
+        settings,
+        tables,
+        aperture,
+        size,
+        linear,
+        transmittance,
+        saved,
+    )
 }
 
 /// Gathers one layer over a band and composites it into `linear` (front to back).
 /// Returns the number of taps visited.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn render_band_layer<T: Real>(
     b: &BandLayer<T>,
     settings: &RenderSettings,
@@ -256,6 +335,7 @@ fn render_band_layer<T: Real>(
     (rows, w): (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [Saved<T>],
 ) -> u64 {
     let big_r = tables.big_r;
     let mut taps = 0u64;
@@ -297,6 +377,16 @@ fn render_band_layer<T: Real>(
         // Half-width of each tap row for this tile's reach (None: row unused).
         let widths: Vec<Option<usize>> = if max_r > f64::NEG_INFINITY {
             let reach = aperture.reach_px(max_r);
+            (-(big_r as isize)..=big_r as isize)
+                .map(|dy| tables.half_width(dy, reach))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        // When recording for the adjoint: the half-widths out to the backward's longer
+        // reach (the ring between the two is summed into the recorded sums only).
+        let ring_widths: Vec<Option<usize>> = if !saved.is_empty() && !widths.is_empty() {
+            let reach = aperture.reach_px(max_r) + RECORD_EXTRA_TAIL_PX;
             (-(big_r as isize)..=big_r as isize)
                 .map(|dy| tables.half_width(dy, reach))
                 .collect()
@@ -395,14 +485,110 @@ fn render_band_layer<T: Real>(
                 };
                 let o = y * w + x;
                 let t = transmittance[o];
+                let colour = acc.map(|v| v * inv);
                 for c in 0..3 {
-                    linear[o][c] = linear[o][c] + acc[c] * inv * coverage * t;
+                    linear[o][c] = linear[o][c] + colour[c] * coverage * t;
                 }
                 transmittance[o] = t * (T::one() - coverage);
+                if let Some(s) = saved.get_mut(o) {
+                    let (ring, ring_weight) =
+                        gather_ring(b, tables, aperture, (&widths, &ring_widths), xi, d_x, e_x);
+                    let weight = weight + ring_weight;
+                    let inv = T::one() / (weight + eps);
+                    *s = Saved {
+                        weight,
+                        colour: [0, 1, 2].map(|c| (acc[c] + ring[c]) * inv),
+                        coverage,
+                    };
+                }
             }
         }
     }
     taps
+}
+
+/// How much further the sums recorded for the adjoint reach than the rendered ones
+/// (`engine/fast_adjoint.rs`, `BACKWARD_EXTRA_TAIL_PX`).
+pub(super) const RECORD_EXTRA_TAIL_PX: f64 = 1.5;
+
+/// The taps between the half-widths `inner` and `outer` of each row (the ring the recorded
+/// sums add to the rendered ones): their `sum c Ilin` and `sum c`.
+#[inline(always)]
+fn gather_ring<T: Real>(
+    b: &BandLayer<T>,
+    tables: &WindowTables<T>,
+    aperture: &ApertureEval<T>,
+    (inner, outer): (&[Option<usize>], &[Option<usize>]),
+    xi: usize,
+    d_x: T,
+    e_x: T,
+) -> ([T; 3], T) {
+    let big_r = tables.big_r;
+    let occluding = e_x >= T::c(FOCUS_WEIGHT_CUTOFF);
+    let (mut acc, mut weight) = ([T::zero(); 3], T::zero());
+    for (t, (&hw_in, &hw_out)) in inner.iter().zip(outer).enumerate() {
+        let Some(hw2) = hw_out else {
+            continue;
+        };
+        let dy = t as isize - big_r as isize;
+        let row = (xi as isize + dy * b.stride as isize) as usize;
+        // Offsets dx in -hw2 ..= hw2 outside -hw ..= hw (all of them if the row was unused).
+        let segments = match hw_in {
+            Some(hw) => [
+                (-(hw2 as isize), -(hw as isize) - 1),
+                (hw as isize + 1, hw2 as isize),
+            ],
+            None => [(-(hw2 as isize), hw2 as isize), (1, 0)],
+        };
+        for (from, to) in segments {
+            if from > to {
+                continue;
+            }
+            let n = (to - from + 1) as usize;
+            let lo = (row as isize + from) as usize;
+            let g0 = (from + big_r as isize) as usize;
+            let gauge = &tables.gauge[t][g0..g0 + n];
+            let (sums, wsum) = match aperture {
+                ApertureEval::Gauge => gather_run(b, lo, n, gauge, d_x, e_x, occluding),
+                ApertureEval::Kernel(..) => {
+                    let (mut a, mut w) = ([T::zero(); 3], T::zero());
+                    for i in 0..n {
+                        let yi = lo + i;
+                        let alpha = b.alpha[yi];
+                        if alpha == T::zero() {
+                            continue;
+                        }
+                        let dx = from + i as isize;
+                        let s = model::scatter_term(
+                            aperture,
+                            dx,
+                            dy,
+                            T::c(tables.dist[t][g0 + i]),
+                            gauge[i],
+                            b.radius[yi],
+                        );
+                        let o = if occluding {
+                            T::one()
+                                + e_x * (model::depth_step_fast(b.rel_disp[yi] - d_x) - T::one())
+                        } else {
+                            T::one()
+                        };
+                        let c = alpha * s * b.inv_area[yi] * o;
+                        a[0] = a[0] + c * b.red[yi];
+                        a[1] = a[1] + c * b.green[yi];
+                        a[2] = a[2] + c * b.blue[yi];
+                        w = w + c;
+                    }
+                    (a, w)
+                }
+            };
+            for c in 0..3 {
+                acc[c] = acc[c] + sums[c];
+            }
+            weight = weight + wsum;
+        }
+    }
+    (acc, weight)
 }
 
 /// Soft-disc coverage `o(x)` ([`model::DiscCoverage`]) at padded receiver `xi`, over the
@@ -460,7 +646,7 @@ fn disc_coverage<T: Real>(
 
 /// Accumulator lanes of the gather run: independent partial sums that the compiler can
 /// keep in one SIMD register each (float sums cannot be reordered otherwise).
-const LANES: usize = 8;
+pub(super) const LANES: usize = 8;
 
 /// Sums `c(y,x) Ilin(y)` and `c(y,x)` over a contiguous run of `n` sources starting at
 /// padded index `lo`, with the run's gauges. Branch-free body in [`LANES`] lanes

@@ -3,6 +3,7 @@
 
 pub mod adjoint;
 mod fast;
+mod fast_adjoint;
 mod reference;
 mod threaded;
 
