@@ -9,7 +9,8 @@
 //!   `paper-gt` (the `paper` preset).
 //!
 //! All methods use the scene's `blur` (K) and `focus` from `scene.json`, gamma 2.2 (the
-//! benchmark's display encoding) and a window wide enough for the largest blur; every
+//! `paper` preset's and the classical baselines' transfer for a display-encoded photo; the
+//! benchmark's images are sRGB-encoded, like photos) and a window wide enough for the largest blur; every
 //! render is clipped to [0, 1] and compared with `bokeh.png` (display-encoded, clipped) by
 //! PSNR, SSIM and MS-SSIM ([`super::metrics`]). Renders are multi-threaded within a method
 //! (rows); scenes and methods run one after another, so every number except the timings is
@@ -35,7 +36,7 @@ use std::time::Instant;
 /// The version of the `results.json` schema.
 pub const SCHEMA_VERSION: u32 = 1;
 
-/// Display gamma of the benchmark's images (`linear = encoded^2.2`).
+/// Gamma with which `paper` and the baselines decode the benchmark's (sRGB) images.
 pub const BENCHMARK_GAMMA: f64 = 2.2;
 
 /// Error maps are drawn from black (no error) to white at this mean absolute error.
