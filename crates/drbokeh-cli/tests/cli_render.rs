@@ -83,6 +83,8 @@ fn machine_contract_writes_exactly_the_library_render() {
         "20",
         "--window",
         "15",
+        "--preset",
+        "paper",
         "--output",
         p(&out32),
         "--quiet",
@@ -95,6 +97,36 @@ fn machine_contract_writes_exactly_the_library_render() {
         .map(|(a, b)| (*a as f64 - b).abs())
         .fold(0.0, f64::max);
     assert!(max <= 1e-4, "f32 CLI output vs f64 reference: {max}");
+    // The default preset is `physical`.
+    let out_default = d.path("default.npy");
+    let o = drbokeh(&[
+        "render",
+        "--layers",
+        p(&stack_path),
+        "--focus",
+        "0.3",
+        "--blur",
+        "20",
+        "--window",
+        "15",
+        "--f64",
+        "--output",
+        p(&out_default),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let got = ndarray::Array3::<f64>::read_npy(std::fs::File::open(&out_default).unwrap()).unwrap();
+    let mut s = drbokeh::RenderSettings::physical(0.3);
+    s.camera.blur_k = 20.0;
+    s.camera.window = drbokeh::Window::from_size(15).unwrap();
+    let want =
+        drbokeh::render(&stack, &s, drbokeh::Engine::Reference, &drbokeh::NoProgress).unwrap();
+    let max = got
+        .iter()
+        .zip(&want.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(max <= 1e-12, "default preset is not physical: {max}");
 }
 
 #[test]

@@ -1,42 +1,54 @@
 //! Ablation of the `physical` preset's options on the ray-traced benchmark.
 //!
 //! For every scene of a benchmark directory (`drbokeh benchmark make`), renders the
-//! ground-truth layer stack (`layers.npz`) with the scene's K and focus (`scene.json`) under
-//! each model variant, and scores it against the ray-traced `bokeh.png` (display-encoded,
-//! clipped to [0, 1]) with PSNR and SSIM. Prints per-scene scores, the means, and how often
+//! ground-truth layer stack (`layers.npz`: sRGB-encoded, highlights above white kept) with
+//! the scene's K and focus (`scene.json`) under each model variant, clips the output to
+//! [0, 1] and scores it against the ray-traced `bokeh.png` (sRGB, clipped) with PSNR and
+//! SSIM. Variants with the gamma transfer decode with gamma 2.2, as `paper` does a photo. Prints per-scene scores, the means, and how often
 //! each variant beats `paper`.
 //!
-//!   cargo run --release -p drbokeh --example physical_ablation -- /tmp/physbench
+//!   cargo run --release -p drbokeh --example physical_ablation -- /tmp/pb7
 //!
 //! The measurement reported in `docs/physical.md` used
-//! `drbokeh benchmark make --scenes 12 --seed 7 --size 256 --spp 256 --out /tmp/physbench`.
+//! `drbokeh benchmark make --scenes 16 --seed 7 --size 256 --spp 256 --out /tmp/pb7` (tuning)
+//! and the same with `--seed 8` (held out).
 
 use drbokeh::eval::metrics::{psnr, ssim};
 use drbokeh::eval::report::SceneInputs;
-use drbokeh::presets::{Coverage, CoverageRadius, Footprint, ModelOptions, Transfer};
+use drbokeh::presets::{Coverage, CoverageRadius, Footprint, ModelOptions, ScatterStep, Transfer};
 use drbokeh::{render, Aperture, Engine, NoProgress, RenderSettings};
 use std::path::PathBuf;
 
 fn variants() -> Vec<(&'static str, ModelOptions)> {
-    let options = |coverage, coverage_radius, transfer, footprint| ModelOptions {
+    let options = |coverage, coverage_radius, transfer, footprint, step| ModelOptions {
         coverage,
         coverage_radius,
         transfer,
         footprint,
+        step,
     };
     use Coverage::{PaperBox, SoftDisc};
     use CoverageRadius::{CircleOfConfusion as Coc, Scatter};
-    use Footprint::{HalfPixel, Pixel};
+    use Footprint::{HalfPixel, Pixel, Point};
+    use ScatterStep::{Paper, Sharp};
     use Transfer::{Gamma, Srgb};
     vec![
         ("paper", ModelOptions::PAPER),
-        ("+disc r(x)", options(SoftDisc, Scatter, Gamma, Pixel)),
-        ("+srgb", options(SoftDisc, Scatter, Srgb, Pixel)),
-        ("+disc K|d|", options(SoftDisc, Coc, Srgb, Pixel)),
+        (
+            "+disc r(x)",
+            options(SoftDisc, Scatter, Gamma, Pixel, Paper),
+        ),
+        ("+disc K|d|", options(SoftDisc, Coc, Gamma, Pixel, Paper)),
+        ("+fp 0.5", options(SoftDisc, Coc, Gamma, HalfPixel, Paper)),
+        ("+sharp", options(SoftDisc, Coc, Gamma, HalfPixel, Sharp)),
         ("physical", ModelOptions::PHYSICAL),
-        ("srgb only", options(PaperBox, Scatter, Srgb, Pixel)),
-        ("fp 0.5 only", options(PaperBox, Scatter, Gamma, HalfPixel)),
-        ("phys, gamma", options(SoftDisc, Coc, Gamma, HalfPixel)),
+        ("phys+srgb", options(SoftDisc, Coc, Srgb, Point, Sharp)),
+        ("srgb only", options(PaperBox, Scatter, Srgb, Pixel, Paper)),
+        (
+            "sharp only",
+            options(PaperBox, Scatter, Gamma, Pixel, Sharp),
+        ),
+        ("phys, box", options(PaperBox, Scatter, Gamma, Point, Sharp)),
     ]
 }
 

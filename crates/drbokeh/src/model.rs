@@ -6,7 +6,7 @@
 //! weight, `B_l` layer colour, `o_l` layer coverage, `T_l` transmittance.
 
 use crate::aperture::{Aperture, ApertureEval};
-use crate::presets::{CoverageRadius, RenderSettings, Transfer};
+use crate::presets::{CoverageRadius, RenderSettings, ScatterStep, Transfer};
 use crate::stack::Layer;
 use crate::Real;
 
@@ -55,10 +55,75 @@ pub fn soft_step_derivative<T: Real>(s: T) -> T {
     T::c(3.0) * s * (T::one() - s)
 }
 
-/// Area normalisation `A = r^2`.
+/// The sharp step of preset `physical` ([`ScatterStep::Sharp`]):
+/// `S = 1 / (1 + exp(-6 (r - dist)))`, half weight at `dist = r`.
 #[inline(always)]
-pub fn area<T: Real>(radius_px: T) -> T {
-    radius_px * radius_px
+pub fn sharp_step<T: Real>(r_minus_dist: T) -> T {
+    T::one() / (T::one() + (T::c(-6.0) * r_minus_dist).exp())
+}
+
+/// [`sharp_step`] with [`Real::exp_fast`] (the fast engine's form; same formula).
+#[inline(always)]
+pub fn sharp_step_fast<T: Real>(r_minus_dist: T) -> T {
+    T::one() / (T::one() + (T::c(-6.0) * r_minus_dist).exp_fast())
+}
+
+/// The scatter term's soft step under `step`: [`soft_step`] or [`sharp_step`].
+#[inline(always)]
+pub fn scatter_step<T: Real>(step: ScatterStep, r_minus_dist: T) -> T {
+    match step {
+        ScatterStep::Paper => soft_step(r_minus_dist),
+        ScatterStep::Sharp => sharp_step(r_minus_dist),
+    }
+}
+
+/// [`scatter_step`] through [`Real::exp_fast`].
+#[inline(always)]
+pub fn scatter_step_fast<T: Real>(step: ScatterStep, r_minus_dist: T) -> T {
+    match step {
+        ScatterStep::Paper => soft_step_fast(r_minus_dist),
+        ScatterStep::Sharp => sharp_step_fast(r_minus_dist),
+    }
+}
+
+/// Derivative of [`scatter_step`] with respect to `r - dist`, from its value:
+/// `3 S (1 - S)` (paper) or `6 S (1 - S)` (sharp).
+#[inline(always)]
+pub fn scatter_step_derivative<T: Real>(step: ScatterStep, s: T) -> T {
+    match step {
+        ScatterStep::Paper => soft_step_derivative(s),
+        ScatterStep::Sharp => T::c(6.0) * s * (T::one() - s),
+    }
+}
+
+/// Area normalisation of a source of radius `r`: the paper's `A = r^2`, or for the sharp
+/// step its kernel's area `A = pi r^2 + 1/2` (the sum of `S` over the pixel grid: `pi r^2`
+/// for large r, 0.51 at `r = 0`, 1.16 at 0.5, 3.3 at 1, against 0.5, 1.29 and 3.64).
+#[inline(always)]
+pub fn source_area<T: Real>(step: ScatterStep, radius_px: T) -> T {
+    match step {
+        ScatterStep::Paper => radius_px * radius_px,
+        ScatterStep::Sharp => T::c(std::f64::consts::PI) * radius_px * radius_px + T::c(0.5),
+    }
+}
+
+/// `dA/dr` of [`source_area`]: `2 r` or `2 pi r`.
+#[inline(always)]
+pub fn source_area_derivative<T: Real>(step: ScatterStep, radius_px: T) -> T {
+    match step {
+        ScatterStep::Paper => T::c(2.0) * radius_px,
+        ScatterStep::Sharp => T::c(2.0 * std::f64::consts::PI) * radius_px,
+    }
+}
+
+/// Radius of the in-focus footprint a kernel aperture is unioned with: the paper's 1, or
+/// half a pixel for the sharp step (the centre pixel only).
+#[inline(always)]
+pub fn kernel_footprint_radius_px<T: Real>(step: ScatterStep) -> T {
+    match step {
+        ScatterStep::Paper => T::one(),
+        ScatterStep::Sharp => T::c(0.5),
+    }
 }
 
 /// Window mask `M(x - y) = 1` iff `dist < R` (strict).
@@ -420,6 +485,7 @@ pub fn reflect(i: isize, n: usize) -> usize {
 /// `S(r - gauge)` for circle and polygon, the kernel image for a kernel aperture.
 #[inline(always)]
 pub(crate) fn scatter_term<T: Real>(
+    step: ScatterStep,
     aperture: &ApertureEval<T>,
     dx: isize,
     dy: isize,
@@ -428,11 +494,14 @@ pub(crate) fn scatter_term<T: Real>(
     radius_y_px: T,
 ) -> T {
     match aperture {
-        ApertureEval::Gauge => soft_step(radius_y_px - gauge),
+        ApertureEval::Gauge => scatter_step(step, radius_y_px - gauge),
         ApertureEval::Kernel(k, _) => {
-            let r = radius_y_px.f64();
+            let r = radius_y_px.f64().max(MIN_COVERAGE_RADIUS_PX);
             let shape = T::c(k.sample(dx as f64 / r, dy as f64 / r));
-            shape.max(soft_step(T::one() - dist))
+            shape.max(scatter_step(
+                step,
+                kernel_footprint_radius_px::<T>(step) - dist,
+            ))
         }
     }
 }
@@ -440,6 +509,7 @@ pub(crate) fn scatter_term<T: Real>(
 /// [`scatter_term`] and its derivative with respect to the source radius `r`.
 #[inline(always)]
 pub(crate) fn scatter_term_with_derivative<T: Real>(
+    step: ScatterStep,
     aperture: &ApertureEval<T>,
     dx: isize,
     dy: isize,
@@ -449,14 +519,14 @@ pub(crate) fn scatter_term_with_derivative<T: Real>(
 ) -> (T, T) {
     match aperture {
         ApertureEval::Gauge => {
-            let s = soft_step(radius_y_px - gauge);
-            (s, soft_step_derivative(s))
+            let s = scatter_step(step, radius_y_px - gauge);
+            (s, scatter_step_derivative(step, s))
         }
         ApertureEval::Kernel(k, _) => {
-            let r = radius_y_px.f64();
+            let r = radius_y_px.f64().max(MIN_COVERAGE_RADIUS_PX);
             let (u, v) = (dx as f64 / r, dy as f64 / r);
             let (shape, du, dv) = k.sample_with_gradient(u, v);
-            let footprint = soft_step(T::one() - dist);
+            let footprint = scatter_step(step, kernel_footprint_radius_px::<T>(step) - dist);
             if T::c(shape) >= footprint {
                 // d/dr k(dx/r, dy/r) = -(du * dx + dv * dy) / r^2
                 (
@@ -472,8 +542,14 @@ pub(crate) fn scatter_term_with_derivative<T: Real>(
 
 /// Tap weight `c(y,x) = a(y) M S(y,x) / A(y) O(y,x)` (M already applied by the caller).
 #[inline(always)]
-pub fn tap_weight<T: Real>(alpha_y: T, scatter: T, radius_y_px: T, occlusion: T) -> T {
-    alpha_y * scatter / area(radius_y_px) * occlusion
+pub fn tap_weight<T: Real>(
+    step: ScatterStep,
+    alpha_y: T,
+    scatter: T,
+    radius_y_px: T,
+    occlusion: T,
+) -> T {
+    alpha_y * scatter / source_area(step, radius_y_px) * occlusion
 }
 
 /// One window offset inside the mask, with its geometry precomputed.

@@ -41,6 +41,9 @@ pub enum Footprint {
     /// `dist = r - ln(10)/3 = r - 0.77`, so even `+1` already gives in-focus pixels a soft
     /// edge; the benchmark prefers the smaller footprint (docs/physical.md).
     HalfPixel,
+    /// `+0`: the scatter radius is the circle of confusion itself, `r = K |d|`. Needs
+    /// [`ScatterStep::Sharp`], whose source area stays finite at `r = 0`.
+    Point,
 }
 
 impl Footprint {
@@ -49,8 +52,25 @@ impl Footprint {
         match self {
             Footprint::Pixel => 1.0,
             Footprint::HalfPixel => 0.5,
+            Footprint::Point => 0.0,
         }
     }
+}
+
+/// The soft step `S(r - dist)` of the scatter term and the source area it is normalised by
+/// (formulas in [`crate::model::scatter_step`] and [`crate::model::source_area`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ScatterStep {
+    /// The supplement's eq. 2, `S = 1 / (1 + 10 exp(-3 (r - dist)))`, with area `r^2`. Its
+    /// half-weight point is at `dist = r - ln(10)/3 = r - 0.77`: a disc 0.77 px smaller
+    /// than `r`, and a 10-90 % ramp 1.5 px wide that blurs in-focus pixels.
+    Paper,
+    /// Centred on the circle of confusion with a one-pixel ramp,
+    /// `S = 1 / (1 + exp(-6 (r - dist)))` (half weight at `dist = r`, 10-90 % over
+    /// 0.73 px, about a pixel's own width), normalised by the step's own area
+    /// `pi r^2 + 1/2` (a disc of radius r; 1/2 at `r = 0`, where the centre pixel keeps
+    /// half weight and its neighbours 0.25 %), so every source spreads the same energy.
+    Sharp,
 }
 
 /// The display transfer used to linearise inputs and encode the output.
@@ -73,6 +93,8 @@ pub struct ModelOptions {
     pub transfer: Transfer,
     /// Pixel footprint in the scatter radius.
     pub footprint: Footprint,
+    /// Shape of the scatter term's soft step and its area normalisation.
+    pub step: ScatterStep,
 }
 
 impl ModelOptions {
@@ -82,13 +104,15 @@ impl ModelOptions {
         coverage_radius: CoverageRadius::Scatter,
         transfer: Transfer::Gamma,
         footprint: Footprint::Pixel,
+        step: ScatterStep::Paper,
     };
     /// The `physical` preset's choices.
     pub const PHYSICAL: ModelOptions = ModelOptions {
         coverage: Coverage::SoftDisc,
         coverage_radius: CoverageRadius::CircleOfConfusion,
-        transfer: Transfer::Srgb,
-        footprint: Footprint::HalfPixel,
+        transfer: Transfer::Gamma,
+        footprint: Footprint::Point,
+        step: ScatterStep::Sharp,
     };
 }
 
@@ -101,7 +125,10 @@ pub enum Preset {
     Paper,
     /// The paper's equation with the terms measured to be closer to a real lens: coverage
     /// averaged over the receiver's soft aperture disc of radius `K |d(x)|` (its circle of
-    /// confusion), exact sRGB transfer, scatter radius `K |d| + 0.5`.
+    /// confusion), a sharp soft step centred on the circle of confusion (`r = K |d|`, no
+    /// pixel footprint) with area normalisation `pi r^2 + 1/2`; the paper's gamma transfer
+    /// (the exact sRGB curve did not win on the benchmark: `docs/physical.md`). The CLI's
+    /// default.
     Physical,
     /// Any combination of options (for ablations); not selectable by name.
     Custom(ModelOptions),
@@ -113,7 +140,7 @@ impl Preset {
         ("paper", "the published Dr.Bokeh model, exactly"),
         (
             "physical",
-            "the paper's equation, coverage over the soft aperture disc, exact sRGB",
+            "the paper's equation with disc coverage and a sharp step centred on the circle of confusion (default)",
         ),
     ];
 
@@ -212,6 +239,13 @@ impl RenderSettings {
     /// Validates camera and aperture.
     pub fn validate(&self) -> Result<()> {
         self.camera.validate()?;
+        let m = self.model();
+        if m.footprint == Footprint::Point && m.step == ScatterStep::Paper {
+            return Err(Error::input(
+                "model options",
+                "footprint `point` needs the sharp scatter step (the paper's area r^2 is 0 in focus)",
+            ));
+        }
         self.aperture.validate()
     }
 }

@@ -506,6 +506,7 @@ impl<T: Real> ThreadedTape<T> {
                             let gc =
                                 gc_rgb[0] * lin[0] + gc_rgb[1] * lin[1] + gc_rgb[2] * lin[2] + gw;
                             let s = model::scatter_term(
+                                kernel.step,
                                 &kernel.aperture,
                                 tap.dx,
                                 tap.dy,
@@ -513,7 +514,7 @@ impl<T: Real> ThreadedTape<T> {
                                 gauge,
                                 r_y,
                             );
-                            let base = gc * a_y * s / model::area(r_y);
+                            let base = gc * a_y * s / model::source_area(kernel.step, r_y);
                             let (_, do_ddx, do_de) =
                                 model::occlusion_derivatives(e_x, layer.rel_disp[yi], d_x);
                             g_d = g_d + base * (do_ddx + do_de * de_dd);
@@ -562,7 +563,8 @@ impl<T: Real> ThreadedTape<T> {
                             layer.rel_disp[yi],
                             layer.rgb_linear[yi],
                         );
-                        let inv_area = T::one() / model::area(r_y);
+                        let inv_area = T::one() / model::source_area(kernel.step, r_y);
+                        let dlog_area = model::source_area_derivative(kernel.step, r_y) * inv_area;
                         let (mut g_lin, mut g_a, mut g_r, mut g_dy) =
                             ([T::zero(); 3], T::zero(), T::zero(), T::zero());
                         for (tap, offset, dist, gauge) in kernel.taps() {
@@ -575,6 +577,7 @@ impl<T: Real> ThreadedTape<T> {
                             let gc =
                                 gc_rgb[0] * lin[0] + gc_rgb[1] * lin[1] + gc_rgb[2] * lin[2] + gw;
                             let (s, ds_dr) = model::scatter_term_with_derivative(
+                                kernel.step,
                                 &kernel.aperture,
                                 tap.dx,
                                 tap.dy,
@@ -596,8 +599,8 @@ impl<T: Real> ThreadedTape<T> {
                                 g_lin[c] = g_lin[c] + gc_rgb[c] * a_y * c_per_alpha;
                             }
                             g_a = g_a + gc * c_per_alpha;
-                            // d(S / r^2)/dr = S'/r^2 - 2 S / r^3
-                            g_r = g_r + gc * a_y * o * (ds_dr - T::c(2.0) * s / r_y) * inv_area;
+                            // d(S / A(r))/dr = (S' - S A'/A) / A
+                            g_r = g_r + gc * a_y * o * (ds_dr - s * dlog_area) * inv_area;
                             g_dy = g_dy + gc * a_y * s * inv_area * do_ddy;
                         }
                         // r = K |d| + 1
@@ -673,8 +676,15 @@ impl<T: Real> ThreadedTape<T> {
                             kernel.coverage_radius,
                             kernel.footprint_px,
                         );
-                        let s =
-                            model::scatter_term(&kernel.aperture, tap.dx, tap.dy, dist, gauge, r_x);
+                        let s = model::scatter_term(
+                            kernel.step,
+                            &kernel.aperture,
+                            tap.dx,
+                            tap.dy,
+                            dist,
+                            gauge,
+                            r_x,
+                        );
                         acc = acc + share[x] * s;
                     }
                     acc

@@ -31,7 +31,7 @@ use super::Progress;
 use crate::aperture::ApertureEval;
 use crate::image::Image;
 use crate::model;
-use crate::presets::{Coverage, RenderSettings};
+use crate::presets::{Coverage, RenderSettings, ScatterStep};
 use crate::stack::{Layer, LayerStack};
 use crate::Real;
 use rayon::prelude::*;
@@ -71,6 +71,7 @@ impl<T: Real> BandLayer<T> {
         let (k, f) = (T::c(cam.blur_k), T::c(cam.focus_disparity));
         let tone = settings.tone();
         let footprint = T::c(settings.model().footprint.px());
+        let step = settings.model().step;
         let n = stride * rows;
         let mut b = BandLayer {
             stride,
@@ -101,7 +102,7 @@ impl<T: Real> BandLayer<T> {
                 b.alpha.push(layer.alpha.data[i]);
                 b.rel_disp.push(d);
                 b.radius.push(r);
-                b.inv_area.push(T::one() / model::area(r));
+                b.inv_area.push(T::one() / model::source_area(step, r));
             }
         }
         let s1 = stride + 1;
@@ -345,6 +346,7 @@ fn render_band_layer<T: Real>(
     let coverage_kind = settings.model().coverage;
     let coverage_radius = settings.model().coverage_radius;
     let footprint = T::c(settings.model().footprint.px());
+    let step = settings.model().step;
     // Per block of ROW_BLOCK padded rows and per padded column, the largest radius among
     // sources with alpha > 0.
     let blocks = b.rows.div_ceil(ROW_BLOCK);
@@ -413,13 +415,21 @@ fn render_band_layer<T: Real>(
                         let n = 2 * hw + 1;
                         taps += n as u64;
                         let (sums, wsum) = match aperture {
-                            ApertureEval::Gauge => {
-                                gather_run(b, lo, n, &gauge_row[g0..g0 + n], d_x, e_x, occluding)
-                            }
+                            ApertureEval::Gauge => gather_run(
+                                b,
+                                step,
+                                lo,
+                                n,
+                                &gauge_row[g0..g0 + n],
+                                d_x,
+                                e_x,
+                                occluding,
+                            ),
                             ApertureEval::Kernel(..) => {
                                 let dist_row = &tables.dist[(dy + big_r as isize) as usize];
                                 gather_run_kernel(
                                     b,
+                                    step,
                                     aperture,
                                     lo,
                                     n,
@@ -442,9 +452,10 @@ fn render_band_layer<T: Real>(
                             let a = b.alpha[xi];
                             let sc = match aperture {
                                 ApertureEval::Gauge => {
-                                    model::soft_step_fast(b.radius[xi] - gauge_row[big_r])
+                                    model::scatter_step_fast(step, b.radius[xi] - gauge_row[big_r])
                                 }
                                 ApertureEval::Kernel(..) => model::scatter_term(
+                                    step,
                                     aperture,
                                     0,
                                     0,
@@ -477,8 +488,15 @@ fn render_band_layer<T: Real>(
                     // No source with alpha > 0 in the window: o = 0 exactly.
                     Coverage::SoftDisc if widths.is_empty() => T::zero(),
                     Coverage::SoftDisc => {
-                        let (c, n) =
-                            disc_coverage(b, tables, aperture, xi, coverage_radius, footprint);
+                        let (c, n) = disc_coverage(
+                            b,
+                            tables,
+                            aperture,
+                            xi,
+                            coverage_radius,
+                            footprint,
+                            step,
+                        );
                         taps += n;
                         c
                     }
@@ -601,6 +619,7 @@ fn disc_coverage<T: Real>(
     xi: usize,
     radius_kind: crate::presets::CoverageRadius,
     footprint: T,
+    step: ScatterStep,
 ) -> (T, u64) {
     let big_r = tables.big_r as isize;
     let (r_x, _) = model::coverage_radius_px(b.radius[xi], radius_kind, footprint);
@@ -622,7 +641,7 @@ fn disc_coverage<T: Real>(
             ApertureEval::Gauge => {
                 let (mut sa, mut sw) = ([T::zero(); LANES], [T::zero(); LANES]);
                 for i in 0..n {
-                    let s = model::soft_step_fast(r_x - gauge[i]);
+                    let s = model::scatter_step_fast(step, r_x - gauge[i]);
                     sa[i % LANES] = sa[i % LANES] + s * alpha[i];
                     sw[i % LANES] = sw[i % LANES] + s;
                 }
@@ -635,7 +654,8 @@ fn disc_coverage<T: Real>(
                 let dist = &tables.dist[t][g0..g0 + n];
                 for i in 0..n {
                     let dx = i as isize - hw as isize;
-                    let s = model::scatter_term(aperture, dx, dy, T::c(dist[i]), gauge[i], r_x);
+                    let s =
+                        model::scatter_term(step, aperture, dx, dy, T::c(dist[i]), gauge[i], r_x);
                     disc.add(s, alpha[i]);
                 }
             }
@@ -652,8 +672,10 @@ pub(super) const LANES: usize = 8;
 /// padded index `lo`, with the run's gauges. Branch-free body in [`LANES`] lanes
 /// (vectorisable); the lane order is fixed, so results do not depend on threads.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn gather_run<T: Real>(
     b: &BandLayer<T>,
+    step: ScatterStep,
     lo: usize,
     n: usize,
     gauge: &[T],
@@ -661,17 +683,24 @@ fn gather_run<T: Real>(
     e_x: T,
     occluding: bool,
 ) -> ([T; 3], T) {
-    if occluding {
-        gather_run_lanes::<T, true>(b, lo, n, gauge, d_x, e_x)
-    } else {
-        gather_run_lanes::<T, false>(b, lo, n, gauge, d_x, e_x)
+    // The step shape and occlusion are loop-invariant: one monomorphised loop each.
+    match (step, occluding) {
+        (ScatterStep::Paper, true) => gather_run_lanes::<T, true, false>(b, lo, n, gauge, d_x, e_x),
+        (ScatterStep::Paper, false) => {
+            gather_run_lanes::<T, false, false>(b, lo, n, gauge, d_x, e_x)
+        }
+        (ScatterStep::Sharp, true) => gather_run_lanes::<T, true, true>(b, lo, n, gauge, d_x, e_x),
+        (ScatterStep::Sharp, false) => {
+            gather_run_lanes::<T, false, true>(b, lo, n, gauge, d_x, e_x)
+        }
     }
 }
 
-/// One tap's weight `c(y,x)` in the fast engine's form; `OCCLUDING = false` means `O = 1`.
+/// One tap's weight `c(y,x)` in the fast engine's form; `OCCLUDING = false` means `O = 1`;
+/// `SHARP` selects [`ScatterStep::Sharp`] (else the paper's step).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn tap_weight_fast<T: Real, const OCCLUDING: bool>(
+fn tap_weight_fast<T: Real, const OCCLUDING: bool, const SHARP: bool>(
     alpha: T,
     radius: T,
     gauge: T,
@@ -680,7 +709,11 @@ fn tap_weight_fast<T: Real, const OCCLUDING: bool>(
     d_x: T,
     e_x: T,
 ) -> T {
-    let s = model::soft_step_fast(radius - gauge);
+    let s = if SHARP {
+        model::sharp_step_fast(radius - gauge)
+    } else {
+        model::soft_step_fast(radius - gauge)
+    };
     let o = if OCCLUDING {
         T::one() + e_x * (model::depth_step_fast(disp - d_x) - T::one())
     } else {
@@ -694,7 +727,7 @@ fn tap_weight_fast<T: Real, const OCCLUDING: bool>(
 const CHUNK: usize = 64;
 
 #[inline(always)]
-fn gather_run_lanes<T: Real, const OCCLUDING: bool>(
+fn gather_run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
     b: &BandLayer<T>,
     lo: usize,
     n: usize,
@@ -721,7 +754,7 @@ fn gather_run_lanes<T: Real, const OCCLUDING: bool>(
         );
         let g = &gauge[start..start + m];
         for i in 0..m {
-            c[i] = tap_weight_fast::<T, OCCLUDING>(
+            c[i] = tap_weight_fast::<T, OCCLUDING, SHARP>(
                 alpha[i],
                 radius[i],
                 g[i],
@@ -764,6 +797,7 @@ fn gather_run_lanes<T: Real, const OCCLUDING: bool>(
 #[allow(clippy::too_many_arguments)]
 fn gather_run_kernel<T: Real>(
     b: &BandLayer<T>,
+    step: ScatterStep,
     aperture: &ApertureEval<T>,
     lo: usize,
     n: usize,
@@ -783,7 +817,15 @@ fn gather_run_kernel<T: Real>(
             continue;
         }
         let dx = i as isize - hw as isize;
-        let s = model::scatter_term(aperture, dx, dy, T::c(dist[i]), gauge[i], b.radius[yi]);
+        let s = model::scatter_term(
+            step,
+            aperture,
+            dx,
+            dy,
+            T::c(dist[i]),
+            gauge[i],
+            b.radius[yi],
+        );
         let o = if occluding {
             T::one() + e_x * (model::depth_step_fast(b.rel_disp[yi] - d_x) - T::one())
         } else {

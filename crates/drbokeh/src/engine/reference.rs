@@ -20,6 +20,7 @@ pub(super) fn render<T: Real>(
     let aperture = ApertureEval::<T>::new(&settings.aperture);
     let tone = settings.tone();
     let coverage_kind = settings.model().coverage;
+    let step = settings.model().step;
     let layers: Vec<PreparedLayer<T>> = stack
         .layers
         .iter()
@@ -45,14 +46,21 @@ pub(super) fn render<T: Real>(
                         let dist = ((dx * dx + dy * dy) as f64).sqrt();
                         let gauge = settings.aperture.gauge(dx as f64, dy as f64);
                         let r_y = layer.radius_px[yi];
-                        let s =
-                            model::scatter_term(&aperture, dx, dy, T::c(dist), T::c(gauge), r_y);
+                        let s = model::scatter_term(
+                            step,
+                            &aperture,
+                            dx,
+                            dy,
+                            T::c(dist),
+                            T::c(gauge),
+                            r_y,
+                        );
                         let o = if dx == 0 && dy == 0 {
                             T::one()
                         } else {
                             model::occlusion(e_x, layer.rel_disp[yi], d_x)
                         };
-                        let c = model::tap_weight(layer.alpha[yi], s, r_y, o);
+                        let c = model::tap_weight(step, layer.alpha[yi], s, r_y, o);
                         let rgb = &layer.rgb_linear[3 * yi..3 * yi + 3];
                         acc.add([rgb[0], rgb[1], rgb[2]], c);
                     }
@@ -77,6 +85,7 @@ pub(super) fn render<T: Real>(
                                 let dist = ((dx * dx + dy * dy) as f64).sqrt();
                                 let gauge = settings.aperture.gauge(dx as f64, dy as f64);
                                 let s = model::scatter_term(
+                                    step,
                                     &aperture,
                                     dx,
                                     dy,

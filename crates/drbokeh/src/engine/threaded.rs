@@ -63,6 +63,7 @@ pub(super) struct Kernel<T> {
     pub coverage: Coverage,
     pub coverage_radius: crate::presets::CoverageRadius,
     pub footprint_px: T,
+    pub step: crate::presets::ScatterStep,
 }
 
 impl<T: Real> Kernel<T> {
@@ -78,6 +79,7 @@ impl<T: Real> Kernel<T> {
             coverage: settings.model().coverage,
             coverage_radius: settings.model().coverage_radius,
             footprint_px: T::c(settings.model().footprint.px()),
+            step: settings.model().step,
         }
     }
 
@@ -103,13 +105,17 @@ impl<T: Real> Kernel<T> {
                 continue;
             }
             let r_y = layer.radius_px[yi];
-            let s = model::scatter_term(&self.aperture, tap.dx, tap.dy, dist, gauge, r_y);
+            let s =
+                model::scatter_term(self.step, &self.aperture, tap.dx, tap.dy, dist, gauge, r_y);
             let o = if offset == 0 {
                 T::one()
             } else {
                 model::occlusion(e_x, layer.rel_disp[yi], d_x)
             };
-            acc.add(layer.rgb_linear[yi], model::tap_weight(a_y, s, r_y, o));
+            acc.add(
+                layer.rgb_linear[yi],
+                model::tap_weight(self.step, a_y, s, r_y, o),
+            );
         }
         (acc, self.coverage(layer, xi))
     }
@@ -145,6 +151,7 @@ impl<T: Real> Kernel<T> {
             let a_y = layer.alpha[(xi as isize + offset) as usize];
             if derivative {
                 let (s, ds) = model::scatter_term_with_derivative(
+                    self.step,
                     &self.aperture,
                     tap.dx,
                     tap.dy,
@@ -154,7 +161,15 @@ impl<T: Real> Kernel<T> {
                 );
                 disc.add_with_derivative(s, ds * dr, a_y);
             } else {
-                let s = model::scatter_term(&self.aperture, tap.dx, tap.dy, dist, gauge, r_x);
+                let s = model::scatter_term(
+                    self.step,
+                    &self.aperture,
+                    tap.dx,
+                    tap.dy,
+                    dist,
+                    gauge,
+                    r_x,
+                );
                 disc.add(s, a_y);
             }
         }

@@ -167,7 +167,10 @@ fn render_one(
         Method::GaussPsf => baselines::gauss_psf(img, disp, cam)?,
         Method::Layered => Baseline::LayeredDisc.render(&stack()?, cam)?,
         Method::PaperAif => report::render_paper(&stack()?, cam)?,
-        Method::LayeredGt | Method::PaperGt => {
+        Method::PhysicalAif => {
+            report::render_preset(crate::Preset::Physical, &stack()?, cam)?
+        }
+        Method::LayeredGt | Method::PaperGt | Method::PhysicalGt => {
             return Err(Error::param(
                 "--methods",
                 format!(

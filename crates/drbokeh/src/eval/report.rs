@@ -6,10 +6,12 @@
 //!   `scatter`, `layered`, `gausspsf` ([`super::baselines`]) and `paper-aif` (the `paper`
 //!   preset on a single opaque layer);
 //! - on the ground-truth layer stack `layers.npz`: `layered-gt` (the layered baseline) and
-//!   `paper-gt` (the `paper` preset).
+//!   `paper-gt` (the `paper` preset); `physical-aif` and `physical-gt`, the `physical` preset on
+//!   the same inputs.
 //!
 //! All methods use the scene's `blur` (K) and `focus` from `scene.json`, gamma 2.2 (the
-//! benchmark's display encoding) and a window wide enough for the largest blur; every
+//! `paper` preset's and the classical baselines' transfer for a display-encoded photo; the
+//! benchmark's images are sRGB-encoded, like photos) and a window wide enough for the largest blur; every
 //! render is clipped to [0, 1] and compared with `bokeh.png` (display-encoded, clipped) by
 //! PSNR, SSIM and MS-SSIM ([`super::metrics`]). Renders are multi-threaded within a method
 //! (rows); scenes and methods run one after another, so every number except the timings is
@@ -24,7 +26,7 @@ use super::metrics;
 use crate::camera::{Camera, Window, AUTO_WINDOW_MARGIN_PX, MAX_WINDOW_SIZE};
 use crate::image::Image;
 use crate::io;
-use crate::presets::RenderSettings;
+use crate::presets::{Preset, RenderSettings};
 use crate::stack::LayerStack;
 use crate::{Engine, Error, NoProgress, Progress, Result};
 use serde::Serialize;
@@ -35,7 +37,7 @@ use std::time::Instant;
 /// The version of the `results.json` schema.
 pub const SCHEMA_VERSION: u32 = 1;
 
-/// Display gamma of the benchmark's images (`linear = encoded^2.2`).
+/// Gamma with which `paper` and the baselines decode the benchmark's (sRGB) images.
 pub const BENCHMARK_GAMMA: f64 = 2.2;
 
 /// Error maps are drawn from black (no error) to white at this mean absolute error.
@@ -58,6 +60,10 @@ pub enum Method {
     PaperAif,
     /// The `paper` preset on the ground-truth layer stack.
     PaperGt,
+    /// The `physical` preset on one opaque layer (the all-in-focus image).
+    PhysicalAif,
+    /// The `physical` preset on the ground-truth layer stack.
+    PhysicalGt,
 }
 
 /// What a method is fed.
@@ -83,14 +89,16 @@ impl MethodInput {
 
 impl Method {
     /// All methods, in report order.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 9] = [
         Method::Gather,
         Method::Scatter,
         Method::GaussPsf,
         Method::Layered,
         Method::PaperAif,
+        Method::PhysicalAif,
         Method::LayeredGt,
         Method::PaperGt,
+        Method::PhysicalGt,
     ];
 
     /// The method's name on the command line and in reports.
@@ -103,13 +111,15 @@ impl Method {
             Method::GaussPsf => "gausspsf",
             Method::PaperAif => "paper-aif",
             Method::PaperGt => "paper-gt",
+            Method::PhysicalAif => "physical-aif",
+            Method::PhysicalGt => "physical-gt",
         }
     }
 
     /// What the method is fed.
     pub fn input(self) -> MethodInput {
         match self {
-            Method::LayeredGt | Method::PaperGt => MethodInput::Layers,
+            Method::LayeredGt | Method::PaperGt | Method::PhysicalGt => MethodInput::Layers,
             _ => MethodInput::AifDisparity,
         }
     }
@@ -124,6 +134,8 @@ impl Method {
             Method::PaperAif => "Dr.Bokeh paper preset on one opaque layer (image + disparity)",
             Method::LayeredGt => "layered disc blur on the ground-truth layers (hidden background available)",
             Method::PaperGt => "Dr.Bokeh paper preset on the ground-truth layers",
+            Method::PhysicalAif => "drbokeh physical preset on one opaque layer (image + disparity)",
+            Method::PhysicalGt => "drbokeh physical preset on the ground-truth layers",
         }
     }
 
@@ -372,6 +384,8 @@ pub fn render_method(method: Method, scene: &SceneInputs) -> Result<Image<f32>> 
         Method::LayeredGt => Baseline::LayeredDisc.render(&scene.layers, &cam)?,
         Method::PaperAif => render_paper(&single()?, &cam)?,
         Method::PaperGt => render_paper(&scene.layers, &cam)?,
+        Method::PhysicalAif => render_preset(Preset::Physical, &single()?, &cam)?,
+        Method::PhysicalGt => render_preset(Preset::Physical, &scene.layers, &cam)?,
     };
     out.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
     Ok(out)
@@ -379,8 +393,18 @@ pub fn render_method(method: Method, scene: &SceneInputs) -> Result<Image<f32>> 
 
 /// The `paper` preset with `camera`, fast engine.
 pub fn render_paper(stack: &LayerStack<f32>, camera: &Camera) -> Result<Image<f32>> {
+    render_preset(Preset::Paper, stack, camera)
+}
+
+/// Renders a stack with a preset, the camera given and a circular aperture (fast engine).
+pub fn render_preset(
+    preset: Preset,
+    stack: &LayerStack<f32>,
+    camera: &Camera,
+) -> Result<Image<f32>> {
     let mut settings = RenderSettings::paper(camera.focus_disparity);
     settings.camera = camera.clone();
+    settings.preset = preset;
     crate::render(stack, &settings, Engine::Fast, &NoProgress)
 }
 

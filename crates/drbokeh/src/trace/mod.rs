@@ -9,8 +9,10 @@
 //! - [`benchmark`]: the seeded procedural scenes of the standard benchmark.
 //! - [`write_scene_dir`]: writes one scene's outputs atomically.
 //!
-//! Display encoding: every display-encoded output (PNG, the layer stack's `rgb`) uses a
-//! pure gamma of 2.2, the `paper` preset's transfer ([`texture::DISPLAY_GAMMA`]).
+//! Display encoding: every display-encoded output (PNG, the layer stack's `rgb`) uses the
+//! exact sRGB curve, as camera photos do ([`texture::DISPLAY_ENCODING`]). The layer stack
+//! is not clipped: highlights above white keep their linear energy (encoded values > 1),
+//! so that a renderer fed the true layers can reproduce the traced bokeh balls.
 //! See `docs/ground-truth.md` for the full description.
 
 pub mod benchmark;
@@ -30,7 +32,7 @@ use crate::io::{self, BitDepth};
 use crate::stack::{Layer, LayerStack};
 use crate::{Error, Progress, Result};
 use std::path::Path;
-use texture::{decode_display, encode_display, DISPLAY_GAMMA};
+use texture::{decode_display, encode_display, DISPLAY_ENCODING};
 
 /// Everything traced for one scene.
 #[derive(Clone, Debug)]
@@ -58,7 +60,7 @@ pub fn trace_scene(
     })
 }
 
-/// Display-encodes a linear image (gamma 2.2, not clipped).
+/// Display-encodes a linear image (sRGB, not clipped).
 pub fn encode_image(linear: &Image<f32>) -> Image<f32> {
     Image {
         width: linear.width,
@@ -73,7 +75,8 @@ pub fn encode_image(linear: &Image<f32>) -> Image<f32> {
 }
 
 /// The layered ground truth as the renderer's layer stack (front first): colour
-/// display-encoded and clipped to [0, 1], alpha, and constant normalised disparity.
+/// display-encoded (sRGB) and *not* clipped (a highlight 10x above white stays 10x above
+/// white after decoding), alpha, and constant normalised disparity.
 pub fn layer_stack(scene: &Scene, pinhole: &PinholeImages) -> Result<LayerStack<f32>> {
     let (w, h) = (scene.optics.width_px, scene.optics.height_px);
     let layers = scene
@@ -81,8 +84,7 @@ pub fn layer_stack(scene: &Scene, pinhole: &PinholeImages) -> Result<LayerStack<
         .iter()
         .zip(&pinhole.layers)
         .map(|(b, l)| {
-            let mut rgb = encode_image(&l.rgb_linear);
-            rgb.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+            let rgb = encode_image(&l.rgb_linear);
             let d = scene.disparity_of_depth(b.depth_mm) as f32;
             Ok(Layer {
                 rgb_encoded: rgb,
@@ -149,7 +151,7 @@ pub fn derived_record(scene: &Scene) -> serde_json::Value {
         "blur": scene.blur_k_px(),
         "focus": scene.focus_disparity(),
         "max_coc_radius_px": max_coc,
-        "display_encoding": format!("gamma {DISPLAY_GAMMA} (linear = encoded^{DISPLAY_GAMMA}); EXR files are linear"),
+        "display_encoding": format!("{DISPLAY_ENCODING}; EXR files are linear; layers.npz rgb is encoded but not clipped"),
         "billboards_front_to_back": billboards,
         "files": {
             "bokeh.png": "ground-truth defocused image, 16-bit, display-encoded, clipped",

@@ -3,20 +3,23 @@
 use crate::{Error, Result};
 use std::path::Path;
 
-/// The display encoding used for every display-encoded value the tracer reads or writes:
-/// a pure power law with gamma 2.2 (the `paper` preset's transfer), `linear = encoded^2.2`.
-pub const DISPLAY_GAMMA: f64 = 2.2;
+/// The display encoding used for every display-encoded value the tracer reads or writes
+/// (texture colours, PNG outputs, the layer stack): the exact sRGB curve (IEC 61966-2-1),
+/// as in camera photos, so the benchmark's inputs are what a user's photo would be.
+/// Written once, in [`crate::model`] (the `physical` preset's transfer).
+pub const DISPLAY_ENCODING: &str = "sRGB (IEC 61966-2-1)";
 
-/// Display-encoded value to linear light (gamma 2.2; negative input gives 0).
+/// Display-encoded value to linear light (exact sRGB; negative input gives 0; values
+/// above 1 continue the power segment).
 #[inline]
 pub fn decode_display(v: f64) -> f64 {
-    v.max(0.0).powf(DISPLAY_GAMMA)
+    crate::model::srgb_to_linear_with_derivative(v.max(0.0)).0
 }
 
-/// Linear light to a display-encoded value (gamma 2.2, not clipped).
+/// Linear light to a display-encoded value (exact sRGB, not clipped).
 #[inline]
 pub fn encode_display(v: f64) -> f64 {
-    v.max(0.0).powf(1.0 / DISPLAY_GAMMA)
+    crate::model::linear_to_srgb(v.max(0.0))
 }
 
 /// A texture: `width x height` texels of premultiplied linear RGBA (`[r a, g a, b a, a]`).
