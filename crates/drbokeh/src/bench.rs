@@ -48,7 +48,7 @@ pub struct BenchRow {
     pub speedup_vs_threaded: Option<f64>,
     /// Largest absolute difference to the comparison engine, in linear light, if measured.
     pub max_linear_diff: Option<f64>,
-    /// Summed area of the blur discs, `sum over pixels with alpha > 0 of pi (r + 6.5)^2`:
+    /// Summed area of the blur discs, `sum over pixels with alpha > 0 of pi (r + SCATTER_TAIL_PX)^2`:
     /// the work a radius-bounded engine must do.
     pub disc_area: f64,
 }
@@ -194,7 +194,9 @@ fn disc_area(stack: &LayerStack<f32>, s: &RenderSettings) -> f64 {
         .flat_map(|l| l.alpha.data.iter().zip(&l.disparity.data))
         .filter(|(a, _)| **a > 0.0)
         .map(|(_, d)| {
-            let r = (k * (*d as f64 - f).abs() + 1.0 + crate::model::SCATTER_TAIL_PX)
+            let r = (k * (*d as f64 - f).abs()
+                + s.model().footprint.px()
+                + crate::model::SCATTER_TAIL_PX)
                 .min(s.camera.window.radius_px() as f64);
             std::f64::consts::PI * r * r
         })

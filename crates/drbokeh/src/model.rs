@@ -45,8 +45,10 @@ pub fn soft_step_fast<T: Real>(r_minus_dist: T) -> T {
 /// = 0.21 (r + 4.83) e^{-13.5} / r^2 < 2e-6` of weight per unit alpha (largest at r = 1),
 /// against a weight sum of at least `S(r)/r^2 ~ 0.67/r^2` from the receiver's own
 /// neighbourhood wherever the layer is opaque: a relative error below about 3e-6 / r^0.
-/// With the half-pixel footprint of preset `physical` (r >= 0.5) the bound is
+/// With the half-pixel footprint (r >= 0.5) the bound is
 /// `0.21 * 5.33 e^{-13.5} / 0.25 < 6.2e-6` against at least `S(0.5)/0.25 = 1.24`: 5e-6.
+/// The sharp step of preset `physical` ([`sharp_step`], `S <= e^{-6 (dist - r)}` beyond r)
+/// drops at most `(pi/3) (r + 4.67) e^{-27} / (pi r^2 + 1/2) < 1e-11` of weight there.
 pub const SCATTER_TAIL_PX: f64 = 4.5;
 
 /// Derivative of [`soft_step`] with respect to `r - dist`, from its value: `3 S (1 - S)`.

@@ -4,8 +4,9 @@
 //!   so padding stays at most half of a band's work); each band builds its
 //!   own reflection-padded planes (rows `y0 - R .. y1 + R`), so memory is bounded by the
 //!   band size, not the image (a 24-MP render never holds full-size padded planes).
-//! - **Tiles and reach**: a source of radius `r` reaches at most `r + 6.5` pixels
-//!   ([`model::SCATTER_TAIL_PX`]: beyond it `S <= 3.4e-10`). For each tile of
+//! - **Tiles and reach**: a source of radius `r` reaches at most `r + 4.5` pixels
+//!   ([`model::SCATTER_TAIL_PX`]: beyond it `S <= 1.4e-7`, and the dropped ring weighs
+//!   below 6e-6 of the kept weight). For each tile of
 //!   [`TILE`] x [`TILE_ROWS`] receivers, the largest radius among sources with alpha > 0 inside the
 //!   tile's window bounds the taps every receiver in it must visit; a tile whose window
 //!   holds no source skips the layer entirely. Cost grows with the actual blur radii, not
@@ -58,6 +59,8 @@ struct BandLayer<T> {
     rel_disp: Vec<T>,
     radius: Vec<T>,
     inv_area: Vec<T>,
+    /// The scatter step's shape (for [`model::scatter_step`] and [`model::source_area`]).
+    step: ScatterStep,
     /// Summed-area table of alpha, (rows + 1) x (stride + 1), f64.
     alpha_sat: Vec<f64>,
 }
@@ -83,6 +86,7 @@ impl<T: Real> BandLayer<T> {
             rel_disp: Vec::with_capacity(n),
             radius: Vec::with_capacity(n),
             inv_area: Vec::with_capacity(n),
+            step,
             alpha_sat: vec![0.0; (rows + 1) * (stride + 1)],
         };
         // Linear colour per source pixel of the rows we need (highlight needs d).
@@ -542,6 +546,7 @@ fn gather_ring<T: Real>(
     e_x: T,
 ) -> ([T; 3], T) {
     let big_r = tables.big_r;
+    let step = b.step;
     let occluding = e_x >= T::c(FOCUS_WEIGHT_CUTOFF);
     let (mut acc, mut weight) = ([T::zero(); 3], T::zero());
     for (t, (&hw_in, &hw_out)) in inner.iter().zip(outer).enumerate() {
@@ -567,7 +572,7 @@ fn gather_ring<T: Real>(
             let g0 = (from + big_r as isize) as usize;
             let gauge = &tables.gauge[t][g0..g0 + n];
             let (sums, wsum) = match aperture {
-                ApertureEval::Gauge => gather_run(b, lo, n, gauge, d_x, e_x, occluding),
+                ApertureEval::Gauge => gather_run(b, step, lo, n, gauge, d_x, e_x, occluding),
                 ApertureEval::Kernel(..) => {
                     let (mut a, mut w) = ([T::zero(); 3], T::zero());
                     for i in 0..n {
@@ -578,6 +583,7 @@ fn gather_ring<T: Real>(
                         }
                         let dx = from + i as isize;
                         let s = model::scatter_term(
+                            step,
                             aperture,
                             dx,
                             dy,

@@ -74,7 +74,7 @@ use super::Progress;
 use crate::aperture::ApertureEval;
 use crate::image::Image;
 use crate::model;
-use crate::presets::{Coverage, RenderSettings};
+use crate::presets::{Coverage, RenderSettings, ScatterStep};
 use crate::stack::LayerStack;
 use crate::Real;
 use rayon::prelude::*;
@@ -119,6 +119,8 @@ struct Sources<T> {
     rel_disp: Vec<T>,
     radius: Vec<T>,
     inv_area: Vec<T>,
+    /// The scatter step's shape.
+    step: ScatterStep,
     /// The image pixel each padded pixel mirrors.
     source: Vec<usize>,
 }
@@ -183,7 +185,10 @@ impl<T: Real> FastTape<T> {
             .iter()
             .map(|l| model::prepare_layer(l, settings))
             .collect();
-        let sources: Vec<Sources<T>> = prepared.iter().map(|p| Sources::new(p, big_r)).collect();
+        let sources: Vec<Sources<T>> = prepared
+            .iter()
+            .map(|p| Sources::new(p, big_r, settings.model().step))
+            .collect();
         // The soft-disc coverage with its derivative, over the backward's longer reach; its
         // value replaces the recorded one (whose shorter tail weighs up to 1.5e-5 of Z at
         // r_c ~ 0), so that o and do/dr come from the same sums.
@@ -363,6 +368,7 @@ fn refine_small_weights<T: Real>(
                         }
                         let g0 = (dx + big_r as isize) as usize;
                         let sc = model::scatter_term(
+                            src.step,
                             aperture,
                             dx,
                             dy,
@@ -377,7 +383,7 @@ fn refine_small_weights<T: Real>(
                         };
                         acc.add(
                             [src.red[yi], src.green[yi], src.blue[yi]],
-                            model::tap_weight(a, sc, src.radius[yi], o),
+                            model::tap_weight(src.step, a, sc, src.radius[yi], o),
                         );
                     }
                 }
@@ -402,6 +408,7 @@ fn refine_small_weights<T: Real>(
                                 let yi = (xi as isize + dy * stride as isize + dx) as usize;
                                 let g0 = (dx + big_r as isize) as usize;
                                 let sc = model::scatter_term(
+                                    src.step,
                                     aperture,
                                     dx,
                                     dy,
@@ -426,7 +433,7 @@ fn refine_small_weights<T: Real>(
 }
 
 impl<T: Real> Sources<T> {
-    fn new(layer: &model::PreparedLayer<T>, pad: usize) -> Self {
+    fn new(layer: &model::PreparedLayer<T>, pad: usize, step: ScatterStep) -> Self {
         let (w, h) = (layer.width, layer.height);
         let (stride, rows) = (w + 2 * pad, h + 2 * pad);
         let source: Vec<usize> = (0..rows)
@@ -454,8 +461,9 @@ impl<T: Real> Sources<T> {
             rel_disp: gather(&layer.rel_disp),
             inv_area: radius
                 .par_iter()
-                .map(|&r| T::one() / model::area(r))
+                .map(|&r| T::one() / model::source_area(step, r))
                 .collect(),
+            step,
             radius,
             source,
         }
@@ -731,7 +739,7 @@ fn occlusion_run<T: Real>(src: &Sources<T>, lo: usize, gauge: &[T], gc: [T; 4], 
         let m = (n - start).min(CHUNK);
         for j in 0..m {
             let i = start + j;
-            let s = model::soft_step_fast(radius[i] - gauge[i]);
+            let s = model::scatter_step_fast(src.step, radius[i] - gauge[i]);
             let g = gc[0] * red[i] + gc[1] * green[i] + gc[2] * blue[i] + gc[3];
             let base = g * alpha[i] * s * inv_area[i];
             let ds = model::depth_step_fast(disp[i] - d_x);
@@ -775,6 +783,7 @@ fn occlusion_run_kernel<T: Real>(
         let dx = j as isize - hw as isize;
         let g0 = (dx + tables.big_r as isize) as usize;
         let s = model::scatter_term(
+            src.step,
             ctx.aperture,
             dx,
             dy,
@@ -821,8 +830,8 @@ fn disc_coverage_with_derivative<T: Real>(
             ApertureEval::Gauge => {
                 let mut lanes = [[T::zero(); LANES]; 4];
                 for i in 0..n {
-                    let s = model::soft_step_fast(r_x - gauge[i]);
-                    let ds = model::soft_step_derivative(s) * dr;
+                    let s = model::scatter_step_fast(src.step, r_x - gauge[i]);
+                    let ds = model::scatter_step_derivative(src.step, s) * dr;
                     let l = i % LANES;
                     lanes[0][l] = lanes[0][l] + s * alpha[i];
                     lanes[1][l] = lanes[1][l] + s;
@@ -839,6 +848,7 @@ fn disc_coverage_with_derivative<T: Real>(
                 for i in 0..n {
                     let dx = i as isize - hw as isize;
                     let (s, ds) = model::scatter_term_with_derivative(
+                        src.step,
                         aperture,
                         dx,
                         dy,
@@ -932,8 +942,10 @@ avx2_dispatch!(
 /// Source terms of one padded pixel, for [`source_run`].
 #[derive(Clone, Copy)]
 struct SourceTerms<T> {
+    step: ScatterStep,
     radius: T,
-    two_over_r: T,
+    /// `A'(r) / A(r)` of the source area ([`model::source_area`]): `2 / r` for the paper.
+    dlog_area: T,
     rel_disp: T,
     lin: [T; 3],
 }
@@ -982,8 +994,10 @@ fn sources_tile_row<T: Real>(ctx: &Ctx<'_, T>, occluding: &[u32], y0: usize) -> 
                 let a = src.alpha[p];
                 let r = src.radius[p];
                 let terms = SourceTerms {
+                    step: src.step,
                     radius: r,
-                    two_over_r: T::c(2.0) / r,
+                    dlog_area: model::source_area_derivative(src.step, r)
+                        / model::source_area(src.step, r),
                     rel_disp: src.rel_disp[p],
                     lin: [src.red[p], src.green[p], src.blue[p]],
                 };
@@ -1012,7 +1026,7 @@ fn sources_tile_row<T: Real>(ctx: &Ctx<'_, T>, occluding: &[u32], y0: usize) -> 
                         source_row_run(ctx, seg, px as isize + 1, hi, (occ, full), terms, &mut acc);
                         // The centre tap: O(x, x) = 1.
                         let i = row + (px - pad);
-                        let (s, ds) = centre_scatter(ctx.aperture, r);
+                        let (s, ds) = centre_scatter(src.step, ctx.aperture, r);
                         let gc = rcv.g_red[i] * terms.lin[0]
                             + rcv.g_green[i] * terms.lin[1]
                             + rcv.g_blue[i] * terms.lin[2]
@@ -1021,7 +1035,7 @@ fn sources_tile_row<T: Real>(ctx: &Ctx<'_, T>, occluding: &[u32], y0: usize) -> 
                         acc[1] = acc[1] + rcv.g_green[i] * s;
                         acc[2] = acc[2] + rcv.g_blue[i] * s;
                         acc[3] = acc[3] + gc * s;
-                        acc[4] = acc[4] + gc * (ds - s * terms.two_over_r);
+                        acc[4] = acc[4] + gc * (ds - s * terms.dlog_area);
                     } else {
                         source_row_run(ctx, seg, lo, hi, (occ, full), terms, &mut acc);
                     }
@@ -1095,14 +1109,14 @@ fn source_row_run<T: Real>(
 
 /// The scatter term of the centre tap and its derivative with respect to `r`.
 #[inline(always)]
-fn centre_scatter<T: Real>(aperture: &ApertureEval<T>, r: T) -> (T, T) {
+fn centre_scatter<T: Real>(step: ScatterStep, aperture: &ApertureEval<T>, r: T) -> (T, T) {
     match aperture {
         ApertureEval::Gauge => {
-            let s = model::soft_step_fast(r);
-            (s, model::soft_step_derivative(s))
+            let s = model::scatter_step_fast(step, r);
+            (s, model::scatter_step_derivative(step, s))
         }
         ApertureEval::Kernel(..) => {
-            model::scatter_term_with_derivative(aperture, 0, 0, T::zero(), T::zero(), r)
+            model::scatter_term_with_derivative(step, aperture, 0, 0, T::zero(), T::zero(), r)
         }
     }
 }
@@ -1112,7 +1126,7 @@ fn centre_scatter<T: Real>(aperture: &ApertureEval<T>, r: T) -> (T, T) {
 const CHUNK: usize = 64;
 
 /// Pass B's run over receivers `i0 .. i0 + gauge.len()` (image indices of one row) for one
-/// source: `[sum gC S O (3), sum gc S O, sum gc O (S' - 2 S / r), sum gc S dO/dd_y]` with
+/// source: `[sum gC S O (3), sum gc S O, sum gc O (S' - S A'/A), sum gc S dO/dd_y]` with
 /// `gc = dL/dC . Ilin(y) + dL/dW`. `OCC = false`: every receiver has `O = 1`. `FULL =
 /// false` (alpha = 0): only the alpha gradient's sum is needed.
 #[inline(always)]
@@ -1143,7 +1157,7 @@ fn source_run<T: Real, const OCC: bool, const FULL: bool>(
         let (e, dx) = (&rcv.focus_weight[s0..s0 + m], &rcv.rel_disp[s0..s0 + m]);
         let g = &gauge[start..start + m];
         for i in 0..m {
-            let s = model::soft_step_fast(src.radius - g[i]);
+            let s = model::scatter_step_fast(src.step, src.radius - g[i]);
             let (o, d_o) = if OCC {
                 let ds = model::depth_step_fast(src.rel_disp - dx[i]);
                 (
@@ -1157,8 +1171,8 @@ fn source_run<T: Real, const OCC: bool, const FULL: bool>(
             so[i] = s * o;
             ga[i] = gc * so[i];
             if FULL {
-                let sd = model::soft_step_derivative(s);
-                rad[i] = gc * o * (sd - s * src.two_over_r);
+                let sd = model::scatter_step_derivative(src.step, s);
+                rad[i] = gc * o * (sd - s * src.dlog_area);
                 if OCC {
                     dyv[i] = gc * s * d_o;
                 }
@@ -1220,6 +1234,7 @@ fn source_run_kernel<T: Real>(
         let (dx, dy) = (-ddx, -ddy);
         let (tr, tc) = ((dy + big_r) as usize, (dx + big_r) as usize);
         let (s, sd) = model::scatter_term_with_derivative(
+            src.step,
             ctx.aperture,
             dx,
             dy,
@@ -1247,7 +1262,7 @@ fn source_run_kernel<T: Real>(
             acc[0] = acc[0] + rcv.g_red[i] * so;
             acc[1] = acc[1] + rcv.g_green[i] * so;
             acc[2] = acc[2] + rcv.g_blue[i] * so;
-            acc[4] = acc[4] + gc * o * (sd - s * src.two_over_r);
+            acc[4] = acc[4] + gc * o * (sd - s * src.dlog_area);
             acc[5] = acc[5] + gc * s * d_o;
         }
     }
@@ -1422,6 +1437,7 @@ fn disc_tile_row<T: Real>(
                     acc = acc
                         + match ctx.aperture {
                             ApertureEval::Gauge => disc_run(
+                                src.step,
                                 &rc[i0..i0 + n],
                                 &share[i0..i0 + n],
                                 &ctx.gauge_flip[t][g0..g0 + n],
@@ -1436,6 +1452,7 @@ fn disc_tile_row<T: Real>(
                                         (dx + big_r as isize) as usize,
                                     );
                                     let s = model::scatter_term(
+                                        src.step,
                                         ctx.aperture,
                                         dx,
                                         dy,
@@ -1458,18 +1475,19 @@ fn disc_tile_row<T: Real>(
 
 /// `sum share(x) S(r_c(x) - gauge)` over one run of receivers, in lanes.
 #[inline(always)]
-fn disc_run<T: Real>(rc: &[T], share: &[T], gauge: &[T]) -> T {
+fn disc_run<T: Real>(step: ScatterStep, rc: &[T], share: &[T], gauge: &[T]) -> T {
     let n = gauge.len();
     let mut lanes = [T::zero(); LANES];
     let full = n / LANES * LANES;
     for base in (0..full).step_by(LANES) {
         for l in 0..LANES {
             let i = base + l;
-            lanes[l] = lanes[l] + share[i] * model::soft_step_fast(rc[i] - gauge[i]);
+            lanes[l] = lanes[l] + share[i] * model::scatter_step_fast(step, rc[i] - gauge[i]);
         }
     }
     for i in full..n {
-        lanes[i - full] = lanes[i - full] + share[i] * model::soft_step_fast(rc[i] - gauge[i]);
+        lanes[i - full] =
+            lanes[i - full] + share[i] * model::scatter_step_fast(step, rc[i] - gauge[i]);
     }
     lane_sum(&lanes)
 }
