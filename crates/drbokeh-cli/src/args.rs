@@ -44,7 +44,7 @@ pub struct SceneArgs {
     pub single_layer: bool,
 
     /// With --image and no --alpha: the most depth layers the decomposition makes
-    /// (default 3; see `drbokeh layers`).
+    /// (default 5; see `drbokeh layers`).
     #[arg(long, value_name = "N", requires = "image", conflicts_with_all = ["alpha", "single_layer"])]
     pub max_layers: Option<usize>,
 
@@ -195,13 +195,73 @@ pub fn tone_for(c: &CameraArgs) -> Result<drbokeh::model::Tone> {
     ))
 }
 
+/// A scene as read from the command line: a ready stack, or an image and disparity map
+/// to decompose into layers.
+enum Parts<T> {
+    Stack(LayerStack<T>),
+    Decompose {
+        rgb: drbokeh::Image<T>,
+        disparity: drbokeh::Image<T>,
+    },
+}
+
+/// The automatic decomposition's options from the scene arguments.
+fn layering_options(a: &SceneArgs) -> drbokeh::layering::LayeringOptions {
+    drbokeh::layering::LayeringOptions {
+        max_layers: a
+            .max_layers
+            .unwrap_or(drbokeh::layering::DEFAULT_MAX_LAYERS),
+        ..Default::default()
+    }
+}
+
+/// Loads the scene as a layer stack (an image and disparity map without a matte are
+/// decomposed into layers unless `--single-layer`, for no particular focus).
 pub fn load_scene<T: Real>(a: &SceneArgs, tone: drbokeh::model::Tone) -> Result<LayerStack<T>> {
+    match load_parts(a, tone)? {
+        Parts::Stack(s) => Ok(s),
+        Parts::Decompose { rgb, disparity } => {
+            Ok(
+                drbokeh::layering::layers_from_disparity(&rgb, &disparity, &layering_options(a))?
+                    .stack,
+            )
+        }
+    }
+}
+
+/// Loads the scene for a render with these camera options. Unless `--single-layer`, an image
+/// is decomposed for the render's focus and blur (cuts that cannot change the render are
+/// left out); returns the stack and the decomposition's notes for the user (e.g. why it
+/// fell back to a single layer).
+pub fn load_scene_for_render<T: Real>(
+    a: &SceneArgs,
+    c: &CameraArgs,
+    engine: drbokeh::Engine,
+) -> Result<(LayerStack<T>, Vec<String>)> {
+    match load_parts(a, tone_for(c)?)? {
+        Parts::Stack(s) => Ok((s, vec![])),
+        Parts::Decompose { rgb, disparity } => {
+            // Focus and blur as they resolve on the single-layer stack (same disparity).
+            let single = LayerStack::single(rgb.clone(), disparity.clone())?;
+            let (settings, _) = settings_for(c, a, &single, engine)?;
+            let mut opts = layering_options(a);
+            opts.focus_hint = Some((
+                settings.camera.focus_disparity,
+                settings.camera.blur_k.abs(),
+            ));
+            let d = drbokeh::layering::layers_from_disparity(&rgb, &disparity, &opts)?;
+            Ok((d.stack, d.notes))
+        }
+    }
+}
+
+fn load_parts<T: Real>(a: &SceneArgs, tone: drbokeh::model::Tone) -> Result<Parts<T>> {
     if a.demo {
         let (w, h) = parse_size(&a.demo_size)?;
-        return Ok(drbokeh::demo::scene(w, h));
+        return Ok(Parts::Stack(drbokeh::demo::scene(w, h)));
     }
     if let Some(p) = &a.layers {
-        return Ok(io::read_stack(p)?);
+        return Ok(Parts::Stack(io::read_stack(p)?));
     }
     let Some(image_path) = &a.image else {
         bail!("no scene given: use --layers STACK.npz, --image IMAGE --disparity MAP, or --demo");
@@ -235,22 +295,14 @@ pub fn load_scene<T: Real>(a: &SceneArgs, tone: drbokeh::model::Tone) -> Result<
     )?;
     check_same_size(image_path, &rgb, map_path, &disparity)?;
     match &a.alpha {
-        None if a.single_layer => Ok(LayerStack::single(rgb, disparity)?),
-        None => {
-            let opts = drbokeh::layering::LayeringOptions {
-                max_layers: a
-                    .max_layers
-                    .unwrap_or(drbokeh::layering::DEFAULT_MAX_LAYERS),
-                ..Default::default()
-            };
-            Ok(drbokeh::layering::layers_from_disparity(&rgb, &disparity, &opts)?.stack)
-        }
+        None if a.single_layer => Ok(Parts::Stack(LayerStack::single(rgb, disparity)?)),
+        None => Ok(Parts::Decompose { rgb, disparity }),
         Some(matte_path) => {
             let matte = io::read_matte(matte_path)?;
             check_same_size(image_path, &rgb, matte_path, &matte)?;
-            Ok(drbokeh::layering::two_layers_from_matte(
+            Ok(Parts::Stack(drbokeh::layering::two_layers_from_matte(
                 &rgb, &disparity, &matte,
-            )?)
+            )?))
         }
     }
 }

@@ -58,6 +58,16 @@ pub struct LayersArgs {
     #[arg(long, value_name = "PX")]
     pub band: Option<f64>,
 
+    /// Make the stack for a render at this focus disparity (with --blur): cuts where the
+    /// nearer side would not be blurred more than the farther one are left out, as
+    /// `drbokeh render --image` does.
+    #[arg(long, value_name = "F", requires = "blur")]
+    pub focus: Option<f64>,
+
+    /// The render's blur K (pixels per unit of disparity), with --focus.
+    #[arg(long, value_name = "K", requires = "focus")]
+    pub blur: Option<f64>,
+
     /// Output layer stack (.npz). Written only once complete.
     #[arg(long, short, value_name = "STACK.npz")]
     pub output: PathBuf,
@@ -90,6 +100,7 @@ pub fn run(a: &LayersArgs) -> Result<()> {
         max_layers: a.max_layers,
         jump_fraction: a.jump,
         occlusion_band_px: a.band,
+        focus_hint: a.focus.zip(a.blur),
         ..LayeringOptions::default()
     };
     opts.validate()?;

@@ -1,6 +1,6 @@
 //! `drbokeh render`.
 
-use crate::args::{load_scene, settings_for, CameraArgs, ExecArgs, SceneArgs};
+use crate::args::{load_scene_for_render, settings_for, CameraArgs, ExecArgs, SceneArgs};
 use crate::progress::Bar;
 use anyhow::Result;
 use clap::Args;
@@ -58,10 +58,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
 
 fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let engine: Engine = a.exec.engine()?;
-    let stack = load_scene::<T>(&a.scene, crate::args::tone_for(&a.camera)?)?;
+    let (stack, notes) = load_scene_for_render::<T>(&a.scene, &a.camera, engine)?;
     let (settings, note) = settings_for(&a.camera, &a.scene, &stack, engine)?;
-    if let (Some(n), false) = (note, a.exec.quiet) {
-        eprintln!("drbokeh: note: {n}");
+    if !a.exec.quiet {
+        for n in notes.iter().chain(&note) {
+            eprintln!("drbokeh: note: {n}");
+        }
     }
     let bar = Bar::new("render", a.exec.quiet);
     let t0 = Instant::now();

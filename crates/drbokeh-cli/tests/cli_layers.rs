@@ -327,4 +327,80 @@ fn bad_inputs_fail_cleanly_and_degenerate_ones_give_one_layer() {
         "-q",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).is_empty(), "{}", stderr(&o));
+    // Without -q, the fallback to one layer is explained in one note line.
+    let o = drbokeh(&["render", "--image", i, "--disparity", p(&ramp), "-o", p(&r)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    let notes: Vec<&str> = err.lines().filter(|l| l.contains("note:")).collect();
+    assert_eq!(notes.len(), 1, "{err}");
+    assert!(
+        notes[0].contains("no disparity discontinuity") && notes[0].contains("single opaque layer"),
+        "{}",
+        notes[0]
+    );
+}
+
+#[test]
+fn render_leaves_out_cuts_that_cannot_change_the_render() {
+    let s = scene();
+    let (i, d) = (p(&s.image), p(&s.disparity));
+    let render = |extra: &[&str], name: &str| {
+        let out = s.dir.path().join(name);
+        let mut args = vec!["render", "--image", i, "--disparity", d, "--blur", "10"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", p(&out)]);
+        let o = drbokeh(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        (stderr(&o), std::fs::read(&out).unwrap())
+    };
+    // Focused on the near half: it is sharp over a blurred background, layers cannot
+    // change the render; a note says so and the output is the single layer's.
+    let (err, near) = render(&["--focus", "1"], "near.png");
+    assert!(
+        err.contains("note:") && err.contains("focus and blur"),
+        "{err}"
+    );
+    let (_, single) = render(&["--focus", "1", "--single-layer"], "single.png");
+    assert_eq!(near, single);
+    // Focused on the far half: two layers, no note.
+    let (err, _) = render(&["--focus", "0"], "far.png");
+    assert!(!err.contains("note:"), "{err}");
+    assert!(err.contains("2 layer(s)"), "{err}");
+    // `layers --focus --blur` makes the same choice.
+    let out = s.dir.path().join("s.npz");
+    let o = drbokeh(&[
+        "layers",
+        "--image",
+        i,
+        "--disparity",
+        d,
+        "--focus",
+        "1",
+        "--blur",
+        "10",
+        "--no-preview",
+        "-o",
+        p(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("focus and blur"), "{}", stderr(&o));
+    assert_eq!(
+        drbokeh::io::read_stack::<f32>(&out).unwrap().layers.len(),
+        1
+    );
+    let o = drbokeh(&[
+        "layers",
+        "--image",
+        i,
+        "--disparity",
+        d,
+        "--focus",
+        "1",
+        "--no-preview",
+        "-o",
+        p(&out),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--blur"), "{}", stderr(&o));
 }

@@ -25,6 +25,104 @@ pub(crate) struct Cuts {
     pub layers: usize,
     /// The thresholds, in disparity units, nearest first (descending).
     pub thresholds: Vec<f64>,
+    /// The chosen bins, ascending (threshold `j` puts bins `>= j` on its near side).
+    chosen: Vec<usize>,
+    /// Lowest disparity and range of the map (bin geometry).
+    lo: f32,
+    range: f32,
+}
+
+/// Keeps only the cuts for which `keep(mean near disparity, mean far disparity)` over the
+/// discontinuities (neighbour steps above `jump`) that the cut separates holds, and
+/// relabels the pixels for the remaining cuts.
+pub(crate) fn keep_blur_relevant(
+    cuts: Cuts,
+    disp: &[f32],
+    w: usize,
+    h: usize,
+    jump: f32,
+    keep: impl Fn(f32, f32) -> bool,
+) -> Cuts {
+    if cuts.layers < 2 {
+        return cuts;
+    }
+    let nc = cuts.layers - 1;
+    // Per cut c (between layers c and c+1): sums of near and far disparities, and counts.
+    let mut sums = vec![(0f64, 0f64, 0u64); nc];
+    let labels = &cuts.labels;
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            for k in [(x + 1 < w).then_some(i + 1), (y + 1 < h).then_some(i + w)]
+                .into_iter()
+                .flatten()
+            {
+                if (disp[i] - disp[k]).abs() <= jump || labels[i] == labels[k] {
+                    continue;
+                }
+                let (n, f) = if labels[i] < labels[k] {
+                    (i, k)
+                } else {
+                    (k, i)
+                };
+                for s in sums
+                    .iter_mut()
+                    .take(labels[f] as usize)
+                    .skip(labels[n] as usize)
+                {
+                    s.0 += disp[n] as f64;
+                    s.1 += disp[f] as f64;
+                    s.2 += 1;
+                }
+            }
+        }
+    }
+    // Cut c has threshold chosen[nc - 1 - c] (chosen is ascending, layers nearest first).
+    let kept: Vec<usize> = (0..nc)
+        .filter(|&c| {
+            let (sn, sf, m) = sums[c];
+            m > 0 && keep((sn / m as f64) as f32, (sf / m as f64) as f32)
+        })
+        .map(|c| cuts.chosen[nc - 1 - c])
+        .collect();
+    if kept.len() == nc {
+        return cuts;
+    }
+    relabel(disp, kept, cuts.lo, cuts.range)
+}
+
+/// Labels and thresholds for the chosen bins.
+fn relabel(disp: &[f32], mut chosen: Vec<usize>, lo: f32, range: f32) -> Cuts {
+    chosen.sort_unstable();
+    let k = chosen.len();
+    if k == 0 {
+        return Cuts {
+            labels: vec![0; disp.len()],
+            layers: 1,
+            thresholds: vec![],
+            chosen,
+            lo,
+            range,
+        };
+    }
+    let bin_of = |v: f32| (((v - lo) / range * BINS as f32) as usize).min(BINS - 1);
+    let labels = disp
+        .par_iter()
+        .map(|&v| (k - chosen.iter().filter(|&&j| bin_of(v) >= j).count()) as u8)
+        .collect();
+    let thresholds = chosen
+        .iter()
+        .rev()
+        .map(|&j| lo as f64 + j as f64 * range as f64 / BINS as f64)
+        .collect();
+    Cuts {
+        labels,
+        layers: k + 1,
+        thresholds,
+        chosen,
+        lo,
+        range,
+    }
 }
 
 /// Finds up to `max_layers - 1` cuts. `jump` is in disparity units.
@@ -47,6 +145,9 @@ pub(crate) fn find_cuts(
         labels: vec![0; n],
         layers: 1,
         thresholds: vec![],
+        chosen: vec![],
+        lo,
+        range: hi - lo,
     };
     let range = hi - lo;
     if range.is_nan() || range <= 0.0 || !range.is_finite() || max_layers < 2 {
@@ -183,20 +284,5 @@ pub(crate) fn find_cuts(
     if chosen.is_empty() {
         return single;
     }
-    chosen.sort_unstable();
-    let k = chosen.len();
-    let labels = bins
-        .par_iter()
-        .map(|&b| (k - chosen.iter().filter(|&&j| b as usize >= j).count()) as u8)
-        .collect();
-    let thresholds = chosen
-        .iter()
-        .rev()
-        .map(|&j| lo as f64 + j as f64 * range as f64 / BINS as f64)
-        .collect();
-    Cuts {
-        labels,
-        layers: k + 1,
-        thresholds,
-    }
+    relabel(disp, chosen, lo, range)
 }

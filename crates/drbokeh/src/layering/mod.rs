@@ -16,15 +16,21 @@
 //! `max_layers` depth intervals at thresholds chosen where many neighbouring pixels jump
 //! in disparity by more than a threshold, and few continuous surfaces are crossed (see
 //! the `cuts` module). Each pixel belongs to the layer of its interval (layer 0 =
-//! nearest). Layer `k` then gets:
+//! nearest). When the render's focus and blur are known ([`LayeringOptions::focus_hint`]),
+//! cuts whose nearer side is not blurred at least [`LayeringOptions::min_blur_gain_px`]
+//! more than its farther side are dropped: such layers cannot change the render much and
+//! only add seams. Layer `k` then gets:
 //! - colour: the image on its own pixels; behind the nearer layers, a fast-marching fill
 //!   from its own pixels only (those within [`LayeringOptions::guard_px`] of a nearer pixel
 //!   excluded, as edge pixels mix both colours), out to
 //!   [`LayeringOptions::occlusion_band_px`] behind the occluder (the last layer: all of it);
-//! - alpha: 1 on its own pixels and on the filled band behind nearer layers; the pixels
-//!   just beyond its cut edges get partial alpha (a box of radius
+//! - alpha: 1 on its own pixels; on the filled band behind nearer layers, its local
+//!   coverage continued under them ([`LayeringOptions::band_alpha_fill`]: a fence stays
+//!   see-through); the pixels just beyond its cut edges get partial alpha (a box of radius
 //!   [`LayeringOptions::feather_px`]), so the edges are soft while the layer's own pixels
-//!   stay opaque (an in-focus render reproduces the image); the last layer is opaque;
+//!   stay opaque (an in-focus render reproduces the image); the last layer is opaque
+//!   (optionally, [`LayeringOptions::matting_px`] estimates edge alpha from local colour
+//!   models instead; it did not help on the ray-traced benchmark and is off by default);
 //! - disparity: its own values, extended everywhere else by a smooth fill from its own
 //!   pixels (so behind a nearer layer it continues the *background* side of the edge).
 //!
@@ -53,7 +59,7 @@ pub const FOREGROUND_THRESHOLD: f64 = 0.5;
 /// Pixels within this distance of any matte value above zero are filled in the background.
 pub const BACKGROUND_DILATION_PX: usize = 2;
 /// Default for [`LayeringOptions::max_layers`].
-pub const DEFAULT_MAX_LAYERS: usize = 3;
+pub const DEFAULT_MAX_LAYERS: usize = 5;
 /// The largest accepted [`LayeringOptions::max_layers`].
 pub const MAX_LAYERS_LIMIT: usize = 16;
 
@@ -76,6 +82,24 @@ pub struct LayeringOptions {
     pub occlusion_band_px: Option<f64>,
     /// Fast-marching inpainting parameters (its `max_distance` is set per layer).
     pub inpaint: TeleaOptions,
+    /// Width (pixels, each side) of the band around each cut edge whose alpha is
+    /// estimated from local colour models (0 = no matting: hard labels and a feather).
+    pub matting_px: usize,
+    /// Colour of the nearer layer on matted edge pixels: `true` un-premultiplies the
+    /// image by the estimated alpha and background, `false` uses the fill from the
+    /// layer's interior.
+    pub matting_unpremultiply: bool,
+    /// Alpha of an intermediate layer where it is filled in behind nearer layers: `true`
+    /// continues the layer's local coverage (a smooth fill of 1 on its pixels and 0 on
+    /// farther ones, so a fence stays see-through), `false` makes the band opaque.
+    pub band_alpha_fill: bool,
+    /// The render the stack is made for, when known: `(focus, blur K)`. A cut is then
+    /// kept only where, on average over the depth edges it separates, the nearer side is
+    /// blurred more than the farther side by at least [`LayeringOptions::min_blur_gain_px`]
+    /// (elsewhere the layers cannot change the render much, and a cut only adds seams).
+    pub focus_hint: Option<(f64, f64)>,
+    /// See [`LayeringOptions::focus_hint`] (pixels of blur radius).
+    pub min_blur_gain_px: f64,
 }
 
 impl Default for LayeringOptions {
@@ -88,6 +112,11 @@ impl Default for LayeringOptions {
             guard_px: 2,
             occlusion_band_px: None,
             inpaint: TeleaOptions::default(),
+            matting_px: 0,
+            matting_unpremultiply: true,
+            band_alpha_fill: true,
+            focus_hint: None,
+            min_blur_gain_px: 1.0,
         }
     }
 }
@@ -119,9 +148,9 @@ impl LayeringOptions {
                 format!("must be in [0, 0.5), got {}", self.min_layer_fraction),
             ));
         }
-        if self.feather_px > 64 || self.guard_px > 64 {
+        if self.feather_px > 64 || self.guard_px > 64 || self.matting_px > 64 {
             return Err(Error::param(
-                "feather_px/guard_px",
+                "feather_px/guard_px/matting_px",
                 "must be at most 64 pixels",
             ));
         }
@@ -132,6 +161,29 @@ impl LayeringOptions {
                     format!("must be a non-negative number of pixels, got {b}"),
                 ));
             }
+        }
+        if let Some((f, k)) = self.focus_hint {
+            if !(0.0..=1.0).contains(&f) {
+                return Err(Error::param(
+                    "--focus",
+                    format!("must be a disparity in [0, 1], got {f}"),
+                ));
+            }
+            if !(k.is_finite() && k >= 0.0) {
+                return Err(Error::param(
+                    "--blur",
+                    format!("must be a finite number >= 0, got {k}"),
+                ));
+            }
+        }
+        if !(self.min_blur_gain_px.is_finite() && self.min_blur_gain_px >= 0.0) {
+            return Err(Error::param(
+                "min_blur_gain_px",
+                format!(
+                    "must be a finite number >= 0, got {}",
+                    self.min_blur_gain_px
+                ),
+            ));
         }
         let r = self.inpaint.radius;
         if !(1.0..=32.0).contains(&r) {
@@ -322,10 +374,21 @@ pub fn layers_from_disparity<T: Real>(
     let jump = (opts.jump_fraction * (hi - lo) as f64) as f32;
     let min_area = ((opts.min_layer_fraction * n as f64).ceil() as u64).max(4);
     let min_edges = ((w + h) as u64 / 100).max(3);
-    let cuts = cuts::find_cuts(&disp32, w, h, opts.max_layers, jump, min_edges, min_area);
+    let mut cuts = cuts::find_cuts(&disp32, w, h, opts.max_layers, jump, min_edges, min_area);
+    let mut dropped = 0;
+    if let Some((focus, blur)) = opts.focus_hint {
+        let before = cuts.layers;
+        cuts = cuts::keep_blur_relevant(cuts, &disp32, w, h, jump, |near, far| {
+            blur * ((near as f64 - focus).abs() - (far as f64 - focus).abs())
+                >= opts.min_blur_gain_px
+        });
+        dropped = before - cuts.layers;
+    }
     if cuts.layers < 2 {
         let why = if opts.max_layers == 1 {
             "--max-layers is 1".to_string()
+        } else if dropped > 0 {
+            "at this focus and blur, no depth edge has its nearer side more blurred than the farther one (layers would not change the render)".to_string()
         } else if hi - lo <= 0.0 {
             "the disparity map is constant".to_string()
         } else {
@@ -344,10 +407,15 @@ pub fn layers_from_disparity<T: Real>(
     let band = opts
         .occlusion_band_px
         .unwrap_or_else(|| (0.05 * w.max(h) as f64).max(16.0));
-    let layers = (0..cuts.layers)
+    let mut layers = (0..cuts.layers)
         .into_par_iter()
         .map(|k| build_layer(k, &cuts, rgb_encoded, disparity, opts, band))
         .collect::<Vec<_>>();
+    if opts.matting_px > 0 {
+        for k in 0..cuts.layers - 1 {
+            matte_edges(k, &cuts.labels, rgb_encoded, &mut layers, opts);
+        }
+    }
     let stack = LayerStack::new(layers)?;
     Ok(Decomposition {
         stack,
@@ -435,11 +503,28 @@ fn build_layer<T: Real>(
     let alpha = if last {
         Image::from_vec(w, h, 1, vec![T::one(); w * h]).expect("shape")
     } else {
-        let hard: Vec<f32> = own
+        let mut hard: Vec<f32> = own
             .iter()
             .zip(&filled)
             .map(|(&o, &f)| if o || f { 1.0 } else { 0.0 })
             .collect();
+        if opts.band_alpha_fill && filled.iter().any(|f| *f) {
+            // Coverage behind the nearer layers continues the layer's own density.
+            let cover = Image::from_vec(
+                w,
+                h,
+                1,
+                own.iter().map(|&o| if o { 1.0f32 } else { 0.0 }).collect(),
+            )
+            .expect("shape");
+            let known: Vec<bool> = nearer.iter().map(|n| !n).collect();
+            let cover = smooth_fill(&cover, &known);
+            for i in 0..w * h {
+                if filled[i] {
+                    hard[i] = cover.data[i].clamp(0.0, 1.0);
+                }
+            }
+        }
         // Feathered outward only: the layer's own pixels stay opaque (an in-focus render
         // reproduces the image), the pixels just beyond its cut edges get partial alpha.
         let soft = box_blur(&hard, w, h, opts.feather_px);
@@ -458,6 +543,113 @@ fn build_layer<T: Real>(
         rgb_encoded: colour,
         alpha,
         disparity: disp,
+    }
+}
+
+/// Below this squared distance between the two colour models (encoded RGB), the alpha
+/// of an edge pixel is not estimated (the colours cannot tell the layers apart).
+const MATTING_MIN_CONTRAST2: f64 = 0.01;
+
+/// Soft alpha at the cut edges of layer `k` from local colour models. Within
+/// `opts.matting_px` of the boundary between layer `k` and the farther layers, F (the
+/// layer's colour, filled outward from its pixels away from the edge) and B (the colour
+/// behind, filled inward from the farther pixels away from the edge) are estimated, and
+/// each edge pixel's alpha is the projection of its colour on the segment from B to F.
+/// The layer's colour there is the image un-premultiplied by alpha and B (or F); the
+/// farther layer that shows at the pixel gets the colour behind (the image with the
+/// nearer part removed, or B), so an in-focus render still composites to the image.
+fn matte_edges<T: Real>(
+    k: usize,
+    labels: &[u8],
+    rgb: &Image<T>,
+    layers: &mut [Layer<T>],
+    opts: &LayeringOptions,
+) {
+    let (w, h) = (rgb.width, rgb.height);
+    let n = w * h;
+    let m = opts.matting_px;
+    let own: Vec<bool> = labels.iter().map(|&l| l as usize == k).collect();
+    let far: Vec<bool> = labels.iter().map(|&l| l as usize > k).collect();
+    let own_or_near: Vec<bool> = labels.iter().map(|&l| l as usize <= k).collect();
+    let near_far = dilate(&far, w, h, m);
+    let near_own = dilate(&own, w, h, m);
+    let near_front = dilate(&own_or_near, w, h, m);
+    let zone: Vec<bool> = (0..n)
+        .map(|i| (own[i] && near_far[i]) || (far[i] && near_own[i]))
+        .collect();
+    if !zone.iter().any(|z| *z) {
+        return;
+    }
+    // Known where the side's own pixels lie away from the other side; filled in the zone.
+    let regions = |known: &dyn Fn(usize) -> bool| -> Vec<Region> {
+        (0..n)
+            .map(|i| {
+                if known(i) {
+                    Region::Known
+                } else if zone[i] {
+                    Region::Fill
+                } else {
+                    Region::Skip
+                }
+            })
+            .collect()
+    };
+    let region_f = regions(&|i| own[i] && !near_far[i]);
+    let region_b = regions(&|i| far[i] && !near_front[i]);
+    let mut topts = opts.inpaint;
+    topts.max_distance = 2.0 * m as f64 + 2.0;
+    let (fo, bo) = rayon::join(
+        || inpaint_telea(rgb, &region_f, &topts),
+        || inpaint_telea(rgb, &region_b, &topts),
+    );
+    let valid = |r: &[Region], o: &Inpainted<T>, i: usize| r[i] == Region::Known || o.filled[i];
+    for i in 0..n {
+        if !zone[i] || !valid(&region_f, &fo, i) || !valid(&region_b, &bo, i) {
+            continue;
+        }
+        let px = |img: &Image<T>| -> [f64; 3] {
+            [
+                img.data[i * 3].f64(),
+                img.data[i * 3 + 1].f64(),
+                img.data[i * 3 + 2].f64(),
+            ]
+        };
+        let (c, f, b) = (px(rgb), px(&fo.image), px(&bo.image));
+        let mut num = 0.0;
+        let mut den = 0.0;
+        for j in 0..3 {
+            num += (c[j] - b[j]) * (f[j] - b[j]);
+            den += (f[j] - b[j]) * (f[j] - b[j]);
+        }
+        if den < MATTING_MIN_CONTRAST2 {
+            continue;
+        }
+        let a = (num / den).clamp(0.0, 1.0);
+        let front = if opts.matting_unpremultiply && a > 0.5 {
+            std::array::from_fn::<f64, 3, _>(|j| ((c[j] - (1.0 - a) * b[j]) / a).clamp(0.0, 1.0))
+        } else {
+            f
+        };
+        let back = if a < 0.5 {
+            std::array::from_fn::<f64, 3, _>(|j| ((c[j] - a * f[j]) / (1.0 - a)).clamp(0.0, 1.0))
+        } else {
+            b
+        };
+        let lk = &mut layers[k];
+        lk.alpha.data[i] = T::c(a);
+        for j in 0..3 {
+            lk.rgb_encoded.data[i * 3 + j] = T::c(front[j]);
+        }
+        // The farther layer that shows here: the pixel's own, or (for an own pixel of
+        // layer k) the first farther layer that is opaque here.
+        let start = if own[i] { k + 1 } else { labels[i] as usize };
+        let last = layers.len() - 1;
+        let target = (start..last)
+            .find(|&j| layers[j].alpha.data[i].f64() >= 0.5)
+            .unwrap_or(last);
+        for j in 0..3 {
+            layers[target].rgb_encoded.data[i * 3 + j] = T::c(back[j]);
+        }
     }
 }
 
