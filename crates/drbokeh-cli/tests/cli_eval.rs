@@ -98,7 +98,8 @@ fn eval_and_gallery_write_their_reports() {
         .skip(1)
         .map(|s| s.split('"').next().unwrap())
         .collect();
-    assert_eq!(srcs.len(), 2 + 3 * 5, "{html}");
+    // Inputs (2) + 3 focal planes x 6 image+disparity methods.
+    assert_eq!(srcs.len(), 2 + 3 * 6, "{html}");
     for s in srcs {
         assert!(gal.join(s).is_file(), "missing {s}");
     }

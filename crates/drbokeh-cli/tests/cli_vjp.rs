@@ -198,6 +198,8 @@ fn vjp_auto_in_f32_uses_the_fast_adjoint() {
             "11",
             "--engine",
             engine,
+            "--preset",
+            "paper",
             "--output",
             p(&out),
             "-q",
