@@ -759,7 +759,7 @@ fn fold_padded<T: Real>(layer: &PaddedLayer<T>, padded: Vec<T>, pixels: usize) -
 
 /// `d|d|/dd`: the sign of `d` (0 at the kink).
 #[inline(always)]
-fn sign<T: Real>(d: T) -> T {
+pub(super) fn sign<T: Real>(d: T) -> T {
     if d > T::zero() {
         T::one()
     } else if d < T::zero() {

@@ -350,7 +350,6 @@ fn render_band_layer<T: Real>(
     let coverage_kind = settings.model().coverage;
     let coverage_radius = settings.model().coverage_radius;
     let footprint = T::c(settings.model().footprint.px());
-    let step = settings.model().step;
     // Per block of ROW_BLOCK padded rows and per padded column, the largest radius among
     // sources with alpha > 0.
     let blocks = b.rows.div_ceil(ROW_BLOCK);
@@ -419,26 +418,18 @@ fn render_band_layer<T: Real>(
                         let n = 2 * hw + 1;
                         taps += n as u64;
                         let (sums, wsum) = match aperture {
-                            ApertureEval::Gauge => gather_run(
-                                b,
-                                step,
-                                lo,
-                                n,
-                                &gauge_row[g0..g0 + n],
-                                d_x,
-                                e_x,
-                                occluding,
-                            ),
+                            ApertureEval::Gauge => {
+                                gather_run(b, lo, n, &gauge_row[g0..g0 + n], d_x, e_x, occluding)
+                            }
                             ApertureEval::Kernel(..) => {
                                 let dist_row = &tables.dist[(dy + big_r as isize) as usize];
                                 gather_run_kernel(
                                     b,
-                                    step,
                                     aperture,
                                     lo,
                                     n,
                                     dy,
-                                    hw,
+                                    -(hw as isize),
                                     &gauge_row[g0..g0 + n],
                                     &dist_row[g0..g0 + n],
                                     d_x,
@@ -455,11 +446,12 @@ fn render_band_layer<T: Real>(
                             // The centre tap has O = 1; the run used O(x,x) = 1 + e (s(0) - 1).
                             let a = b.alpha[xi];
                             let sc = match aperture {
-                                ApertureEval::Gauge => {
-                                    model::scatter_step_fast(step, b.radius[xi] - gauge_row[big_r])
-                                }
+                                ApertureEval::Gauge => model::scatter_step_fast(
+                                    b.step,
+                                    b.radius[xi] - gauge_row[big_r],
+                                ),
                                 ApertureEval::Kernel(..) => model::scatter_term(
-                                    step,
+                                    b.step,
                                     aperture,
                                     0,
                                     0,
@@ -492,15 +484,8 @@ fn render_band_layer<T: Real>(
                     // No source with alpha > 0 in the window: o = 0 exactly.
                     Coverage::SoftDisc if widths.is_empty() => T::zero(),
                     Coverage::SoftDisc => {
-                        let (c, n) = disc_coverage(
-                            b,
-                            tables,
-                            aperture,
-                            xi,
-                            coverage_radius,
-                            footprint,
-                            step,
-                        );
+                        let (c, n) =
+                            disc_coverage(b, tables, aperture, xi, coverage_radius, footprint);
                         taps += n;
                         c
                     }
@@ -546,7 +531,6 @@ fn gather_ring<T: Real>(
     e_x: T,
 ) -> ([T; 3], T) {
     let big_r = tables.big_r;
-    let step = b.step;
     let occluding = e_x >= T::c(FOCUS_WEIGHT_CUTOFF);
     let (mut acc, mut weight) = ([T::zero(); 3], T::zero());
     for (t, (&hw_in, &hw_out)) in inner.iter().zip(outer).enumerate() {
@@ -572,39 +556,20 @@ fn gather_ring<T: Real>(
             let g0 = (from + big_r as isize) as usize;
             let gauge = &tables.gauge[t][g0..g0 + n];
             let (sums, wsum) = match aperture {
-                ApertureEval::Gauge => gather_run(b, step, lo, n, gauge, d_x, e_x, occluding),
-                ApertureEval::Kernel(..) => {
-                    let (mut a, mut w) = ([T::zero(); 3], T::zero());
-                    for i in 0..n {
-                        let yi = lo + i;
-                        let alpha = b.alpha[yi];
-                        if alpha == T::zero() {
-                            continue;
-                        }
-                        let dx = from + i as isize;
-                        let s = model::scatter_term(
-                            step,
-                            aperture,
-                            dx,
-                            dy,
-                            T::c(tables.dist[t][g0 + i]),
-                            gauge[i],
-                            b.radius[yi],
-                        );
-                        let o = if occluding {
-                            T::one()
-                                + e_x * (model::depth_step_fast(b.rel_disp[yi] - d_x) - T::one())
-                        } else {
-                            T::one()
-                        };
-                        let c = alpha * s * b.inv_area[yi] * o;
-                        a[0] = a[0] + c * b.red[yi];
-                        a[1] = a[1] + c * b.green[yi];
-                        a[2] = a[2] + c * b.blue[yi];
-                        w = w + c;
-                    }
-                    (a, w)
-                }
+                ApertureEval::Gauge => gather_run(b, lo, n, gauge, d_x, e_x, occluding),
+                ApertureEval::Kernel(..) => gather_run_kernel(
+                    b,
+                    aperture,
+                    lo,
+                    n,
+                    dy,
+                    from,
+                    gauge,
+                    &tables.dist[t][g0..g0 + n],
+                    d_x,
+                    e_x,
+                    occluding,
+                ),
             };
             for c in 0..3 {
                 acc[c] = acc[c] + sums[c];
@@ -625,7 +590,6 @@ fn disc_coverage<T: Real>(
     xi: usize,
     radius_kind: crate::presets::CoverageRadius,
     footprint: T,
-    step: ScatterStep,
 ) -> (T, u64) {
     let big_r = tables.big_r as isize;
     let (r_x, _) = model::coverage_radius_px(b.radius[xi], radius_kind, footprint);
@@ -647,7 +611,7 @@ fn disc_coverage<T: Real>(
             ApertureEval::Gauge => {
                 let (mut sa, mut sw) = ([T::zero(); LANES], [T::zero(); LANES]);
                 for i in 0..n {
-                    let s = model::scatter_step_fast(step, r_x - gauge[i]);
+                    let s = model::scatter_step_fast(b.step, r_x - gauge[i]);
                     sa[i % LANES] = sa[i % LANES] + s * alpha[i];
                     sw[i % LANES] = sw[i % LANES] + s;
                 }
@@ -661,7 +625,7 @@ fn disc_coverage<T: Real>(
                 for i in 0..n {
                     let dx = i as isize - hw as isize;
                     let s =
-                        model::scatter_term(step, aperture, dx, dy, T::c(dist[i]), gauge[i], r_x);
+                        model::scatter_term(b.step, aperture, dx, dy, T::c(dist[i]), gauge[i], r_x);
                     disc.add(s, alpha[i]);
                 }
             }
@@ -681,7 +645,6 @@ pub(super) const LANES: usize = 8;
 #[allow(clippy::too_many_arguments)]
 fn gather_run<T: Real>(
     b: &BandLayer<T>,
-    step: ScatterStep,
     lo: usize,
     n: usize,
     gauge: &[T],
@@ -690,7 +653,7 @@ fn gather_run<T: Real>(
     occluding: bool,
 ) -> ([T; 3], T) {
     // The step shape and occlusion are loop-invariant: one monomorphised loop each.
-    match (step, occluding) {
+    match (b.step, occluding) {
         (ScatterStep::Paper, true) => gather_run_lanes::<T, true, false>(b, lo, n, gauge, d_x, e_x),
         (ScatterStep::Paper, false) => {
             gather_run_lanes::<T, false, false>(b, lo, n, gauge, d_x, e_x)
@@ -803,12 +766,11 @@ fn gather_run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
 #[allow(clippy::too_many_arguments)]
 fn gather_run_kernel<T: Real>(
     b: &BandLayer<T>,
-    step: ScatterStep,
     aperture: &ApertureEval<T>,
     lo: usize,
     n: usize,
     dy: isize,
-    hw: usize,
+    dx0: isize,
     gauge: &[T],
     dist: &[f64],
     d_x: T,
@@ -822,9 +784,9 @@ fn gather_run_kernel<T: Real>(
         if a == T::zero() {
             continue;
         }
-        let dx = i as isize - hw as isize;
+        let dx = dx0 + i as isize;
         let s = model::scatter_term(
-            step,
+            b.step,
             aperture,
             dx,
             dy,

@@ -66,8 +66,8 @@
 //! an idle machine in issue 6).
 
 use super::adjoint::{
-    check_grad_output, focus_gradient, layer_gradients, receiver_gradients, source_derivatives,
-    Gradients, ReceiverGrads, Saved,
+    check_grad_output, focus_gradient, layer_gradients, receiver_gradients, sign,
+    source_derivatives, Gradients, ReceiverGrads, Saved,
 };
 use super::fast::{self, WindowTables, FOCUS_WEIGHT_CUTOFF, LANES, ROW_BLOCK, TILE, TILE_ROWS};
 use super::Progress;
@@ -510,18 +510,6 @@ pub(super) const BACKWARD_EXTRA_TAIL_PX: f64 = super::fast::RECORD_EXTRA_TAIL_PX
 #[inline(always)]
 fn backward_reach<T: Real>(aperture: &ApertureEval<T>, r: f64) -> f64 {
     aperture.reach_px(r) + BACKWARD_EXTRA_TAIL_PX
-}
-
-/// `d|d|/dd`: the sign of `d` (0 at the kink).
-#[inline(always)]
-fn sign<T: Real>(d: T) -> T {
-    if d > T::zero() {
-        T::one()
-    } else if d < T::zero() {
-        -T::one()
-    } else {
-        T::zero()
-    }
 }
 
 /// Sums of `LANES` partial sums, in lane order.
