@@ -215,20 +215,6 @@ fn layering_options(a: &SceneArgs) -> drbokeh::layering::LayeringOptions {
     }
 }
 
-/// Loads the scene as a layer stack (an image and disparity map without a matte are
-/// decomposed into layers unless `--single-layer`, for no particular focus).
-pub fn load_scene<T: Real>(a: &SceneArgs, tone: drbokeh::model::Tone) -> Result<LayerStack<T>> {
-    match load_parts(a, tone)? {
-        Parts::Stack(s) => Ok(s),
-        Parts::Decompose { rgb, disparity } => {
-            Ok(
-                drbokeh::layering::layers_from_disparity(&rgb, &disparity, &layering_options(a))?
-                    .stack,
-            )
-        }
-    }
-}
-
 /// Loads the scene for a render with these camera options. Unless `--single-layer`, an image
 /// is decomposed for the render's focus and blur (cuts that cannot change the render are
 /// left out); returns the stack and the decomposition's notes for the user (e.g. why it

@@ -257,7 +257,7 @@ fn run_make(a: &MakeArgs) -> Result<()> {
             "eta": benchmark::ETA,
         },
         "fov_deg": benchmark::FOV_DEG,
-        "display_encoding": "gamma 2.2",
+        "display_encoding": drbokeh::trace::texture::DISPLAY_ENCODING,
         "entries": entries,
     });
     let manifest_path = a.out.join("manifest.json");

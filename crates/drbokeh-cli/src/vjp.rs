@@ -1,6 +1,6 @@
 //! `drbokeh vjp`: gradients of `sum(G * render)` with respect to every input.
 
-use crate::args::{load_scene, settings_for, CameraArgs, ExecArgs, SceneArgs};
+use crate::args::{load_scene_for_render, settings_for, CameraArgs, ExecArgs, SceneArgs};
 use crate::progress::Bar;
 use anyhow::{bail, Result};
 use clap::Args;
@@ -11,7 +11,9 @@ use std::path::PathBuf;
 ///
 /// `render` is what `drbokeh render --output x.npy` writes with the same flags (display-encoded
 /// values). The output NPZ holds `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W) and the
-/// scalars `blur` (d/dK) and `focus` (d/df); float64 with --f64.
+/// scalars `blur` (d/dK) and `focus` (d/df); float64 with --f64. With --image/--disparity
+/// the image is decomposed into layers exactly as `render` does for the same focus and blur
+/// (one opaque layer with --single-layer), and N is that stack's layer count.
 ///
 /// --engine auto (the default) runs forward and backward on the fast engine in f32 (only the
 /// taps that can contribute; within 1e-5 of the exact gradient's largest value, tested) and
@@ -65,8 +67,15 @@ pub fn run(a: &VjpArgs) -> Result<()> {
 }
 
 fn run_typed<T: Real>(a: &VjpArgs) -> Result<()> {
-    let stack = load_scene::<T>(&a.scene, crate::args::tone_for(&a.camera)?)?;
     let engine = a.exec.engine()?;
+    // The same stack as `render` with these options (an image is decomposed for this
+    // focus and blur), so the forward pass here is the render the gradient belongs to.
+    let (stack, notes) = load_scene_for_render::<T>(&a.scene, &a.camera, engine)?;
+    if !a.exec.quiet {
+        for n in &notes {
+            eprintln!("drbokeh: note: {n}");
+        }
+    }
     let (settings, _) = settings_for(&a.camera, &a.scene, &stack, engine)?;
     let g = drbokeh::io::read_npy_image::<T>(&a.grad_output, 3, "output gradient")?;
     if g.width != stack.width || g.height != stack.height {

@@ -404,3 +404,50 @@ fn render_leaves_out_cuts_that_cannot_change_the_render() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--blur"), "{}", stderr(&o));
 }
+
+#[test]
+fn vjp_on_an_image_uses_the_render_decomposition() {
+    use ndarray::Array3;
+    use ndarray_npy::NpzReader;
+    let s = scene();
+    let (i, d) = (p(&s.image), p(&s.disparity));
+    let grad = s.dir.path().join("g.npy");
+    ndarray_npy::write_npy(
+        &grad,
+        &ndarray::Array3::<f32>::ones((H as usize, W as usize, 3)),
+    )
+    .unwrap();
+    // The number of layers in the gradient file is the number the render used.
+    let layers_for = |focus: &str| {
+        let out = s.dir.path().join(format!("grads-{focus}.npz"));
+        let o = drbokeh(&[
+            "vjp",
+            "--image",
+            i,
+            "--disparity",
+            d,
+            "--blur",
+            "10",
+            "--focus",
+            focus,
+            "--grad-output",
+            p(&grad),
+            "-o",
+            p(&out),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let mut npz = NpzReader::new(std::fs::File::open(&out).unwrap()).unwrap();
+        let alpha: Array3<f32> = npz.by_name("alpha").unwrap();
+        (alpha.shape()[0], stderr(&o))
+    };
+    // Focused on the near half, the cut cannot change the render: one layer, with a note.
+    let (n, err) = layers_for("1");
+    assert_eq!(n, 1, "{err}");
+    assert!(
+        err.contains("note:") && err.contains("focus and blur"),
+        "{err}"
+    );
+    // Focused on the far half: the two layers `render` uses.
+    let (n, err) = layers_for("0");
+    assert_eq!(n, 2, "{err}");
+}

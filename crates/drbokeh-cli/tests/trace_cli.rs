@@ -218,6 +218,10 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
     let manifest: serde_json::Value =
         serde_json::from_str(&String::from_utf8_lossy(&a[0].1)).unwrap();
     assert_eq!(manifest["entries"].as_array().unwrap().len(), 3);
+    assert_eq!(
+        manifest["display_encoding"].as_str(),
+        Some(drbokeh::trace::texture::DISPLAY_ENCODING)
+    );
     // Re-running skips finished scenes (their files are not rewritten).
     let stamp = std::fs::metadata(full.join("scene_001/bokeh.png"))
         .unwrap()
