@@ -70,7 +70,7 @@ pub enum DepthKindArg {
 #[derive(Args, Debug, Clone)]
 pub struct CameraArgs {
     /// Focus disparity in [0, 1] (the normalised disparity that is sharp).
-    #[arg(long, value_name = "F", conflicts_with = "focus_at")]
+    #[arg(long, value_name = "F", conflicts_with = "focus_at", value_parser = crate::values::focus)]
     pub focus: Option<f64>,
 
     /// Tap to focus: focus on the disparity at pixel X,Y (frontmost layer with alpha >= 0.5).
@@ -180,6 +180,7 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
     };
     let (w, h) = (parse(w)?, parse(h)?);
     drbokeh::image::check_dimensions("--demo-size", w, h)?;
+    drbokeh::budget::check_work("--demo-size", w as u64, h as u64, drbokeh::demo::LAYERS)?;
     Ok((w, h))
 }
 
@@ -262,6 +263,20 @@ fn load_parts<T: Real>(a: &SceneArgs, tone: drbokeh::model::Tone) -> Result<Part
         Some(DepthKindArg::Depth) => DepthKind::Depth,
         None => implied,
     };
+    // The decomposition may make up to max_layers layers: check that work against the
+    // input budget from the image's header, before reading anything.
+    let layers = match (&a.alpha, a.single_layer) {
+        (Some(_), _) => 2,
+        (None, true) => 1,
+        (None, false) => layering_options(a).max_layers as u64,
+    };
+    let (iw, ih) = io::image_dimensions(image_path, "image")?;
+    drbokeh::budget::check_work(
+        &image_path.display().to_string(),
+        iw as u64,
+        ih as u64,
+        layers,
+    )?;
     let mut rgb: drbokeh::Image<T> = io::read_rgb(image_path)?;
     if image_path
         .extension()
@@ -338,7 +353,21 @@ pub fn settings_for<T: Real>(
         (None, None) if scene.demo => drbokeh::demo::DEMO_FOCUS,
         (None, None) => stack.disparity_at(stack.width / 2, stack.height / 2)?,
     };
+    // A focus read from the map (not given with --focus) is the map's problem, not --focus's.
+    let focus = match (c.focus, crate::values::unit_interval(focus)) {
+        (None, None) => bail!(
+            "the disparity {focus} at the {} lies outside [0, 1] and cannot be the focus; pass --focus, or let the map be normalised (no --no-normalize)",
+            c.focus_at
+                .as_ref()
+                .map_or("centre pixel".to_string(), |xy| format!("--focus-at pixel {xy}"))
+        ),
+        (_, Some(f)) => f,
+        (Some(f), None) => f,
+    };
     let aperture = match c.aperture.strip_prefix("kernel:") {
+        Some("") => {
+            bail!("invalid parameter --aperture: kernel: needs an image, as in kernel:IMAGE")
+        }
         Some(path) => {
             let grey = io::read_grey::<f64>(Path::new(path), "aperture kernel")?;
             Aperture::Kernel(

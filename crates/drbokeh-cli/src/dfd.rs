@@ -43,7 +43,7 @@ pub struct DfdArgs {
     #[arg(long, value_name = "IMAGE")]
     pub defocused: PathBuf,
     /// Focus disparity of the defocused image, in [0, 1].
-    #[arg(long)]
+    #[arg(long, value_parser = crate::values::focus)]
     pub focus: f64,
     /// Blur strength K of the defocused image.
     #[arg(long = "blur", value_name = "K")]
@@ -98,18 +98,21 @@ fn options(opt: &OptimiserArgs, focus: f64, blur_k: f64) -> Result<DfdOptions> {
 }
 
 pub fn run(a: &DfdArgs) -> Result<()> {
-    let ext = a
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    if !["png", "npy", "exr"].contains(&ext.as_str()) {
-        bail!(
-            "{}: unsupported output extension (use .png, .npy or .exr)",
-            a.output.display()
-        );
-    }
+    let log_path = a
+        .log
+        .clone()
+        .unwrap_or_else(|| with_suffix(&a.output, ".log.json"));
+    let preview = a
+        .preview
+        .clone()
+        .unwrap_or_else(|| with_suffix(&a.output, ".preview.png"));
+    io::OutputPlan::new()
+        .input(&a.all_in_focus, "--all-in-focus")
+        .input(&a.defocused, "--defocused")
+        .file(&a.output, "--output", &["png", "npy", "exr"])
+        .file(&log_path, "--log", &[])
+        .file(&preview, "--preview", crate::outputs::RENDER_EXTENSIONS)
+        .check()?;
     let mut o = options(&a.opt, a.focus, a.blur_k)?;
     // dfd computes in f32: auto is the fast engine (as for render).
     o.engine = match a.engine.as_str() {
@@ -136,15 +139,9 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     bar.start((o.iterations * o.scales) as u64);
     let (disp, log) = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
     bar.finish();
-    io::write_grey(&a.output, &disp)?;
-    let log_path = a
-        .log
-        .clone()
-        .unwrap_or_else(|| with_suffix(&a.output, ".log.json"));
-    let preview = a
-        .preview
-        .clone()
-        .unwrap_or_else(|| with_suffix(&a.output, ".preview.png"));
+    // All three outputs appear together, once all are written.
+    let mut staging = io::Staging::new();
+    staging.grey(&a.output, &disp)?;
     let json = serde_json::to_vec_pretty(&serde_json::json!({
         "layer": o.layer.name(),
         "weights": o.weights,
@@ -156,18 +153,15 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         "blur": a.blur_k,
         "log": log,
     }))?;
-    io::write_atomic(&log_path, |w| {
-        use std::io::Write;
-        w.write_all(&json)
-            .map_err(|e| drbokeh::Error::file(&log_path, e.to_string()))
-    })?;
+    staging.bytes(&log_path, &json)?;
     let rgb = drbokeh::Image::from_vec(
         disp.width,
         disp.height,
         3,
         disp.data.iter().flat_map(|&v| [v; 3]).collect(),
     )?;
-    io::write_output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
+    staging.output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
+    staging.commit()?;
     if !a.quiet {
         let last = log.last().map(|e| e.loss).unwrap_or(f64::NAN);
         eprintln!(
@@ -224,7 +218,15 @@ pub fn run_eval(a: &DfdEvalArgs) -> Result<()> {
     let layers = a
         .layers
         .split(',')
-        .map(|s| s.trim().parse::<RenderLayer>())
+        .map(|s| {
+            s.trim().parse::<RenderLayer>().map_err(|e| match e {
+                // The parser speaks of dfd's --layer; here the option is --layers.
+                drbokeh::Error::InvalidParameter { problem, .. } => {
+                    drbokeh::Error::param("--layers", problem)
+                }
+                e => e,
+            })
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let template = options(&a.opt, 1.0, a.blur_k)?;
     std::fs::create_dir_all(&a.out)

@@ -61,7 +61,7 @@ pub struct LayersArgs {
     /// Make the stack for a render at this focus disparity (with --blur): cuts where the
     /// nearer side would not be blurred more than the farther one are left out, as
     /// `drbokeh render --image` does.
-    #[arg(long, value_name = "F", requires = "blur")]
+    #[arg(long, value_name = "F", requires = "blur", value_parser = crate::values::focus)]
     pub focus: Option<f64>,
 
     /// The render's blur K (pixels per unit of disparity), with --focus.
@@ -86,16 +86,39 @@ pub struct LayersArgs {
 }
 
 pub fn run(a: &LayersArgs) -> Result<()> {
-    if !a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npz"))
-    {
-        bail!(
-            "{}: the layer stack is written as NPZ: use a .npz output name",
-            a.output.display()
-        );
+    // Every output (the stack and each possible preview) checked before any work.
+    let mut plan = io::OutputPlan::new();
+    plan.input(&a.image, "--image");
+    for (p, option) in [
+        (&a.disparity, "--disparity"),
+        (&a.depth, "--depth"),
+        (&a.alpha, "--alpha"),
+    ] {
+        if let Some(p) = p {
+            plan.input(p, option);
+        }
     }
+    plan.file(&a.output, "--output", &["npz"]);
+    let most_layers = if a.alpha.is_some() {
+        2
+    } else {
+        a.max_layers.clamp(1, 16)
+    };
+    if !a.no_preview {
+        for k in 0..most_layers {
+            plan.file(
+                sibling(&a.output, &format!("layer{k}.png")),
+                "a preview",
+                &["png"],
+            );
+            plan.file(
+                sibling(&a.output, &format!("layer{k}.disparity.png")),
+                "a preview",
+                &["png"],
+            );
+        }
+    }
+    plan.check()?;
     let opts = LayeringOptions {
         max_layers: a.max_layers,
         jump_fraction: a.jump,
@@ -120,6 +143,13 @@ pub fn run(a: &LayersArgs) -> Result<()> {
             "drbokeh layers needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"
         ),
     };
+    let (iw, ih) = io::image_dimensions(&a.image, "image")?;
+    drbokeh::budget::check_work(
+        &a.image.display().to_string(),
+        iw as u64,
+        ih as u64,
+        most_layers as u64,
+    )?;
     let mut rgb: Image<f32> = io::read_rgb(&a.image)?;
     if a.image
         .extension()
@@ -149,10 +179,13 @@ pub fn run(a: &LayersArgs) -> Result<()> {
     let t0 = Instant::now();
     let d = layering::decompose(&rgb, &disparity, matte.as_ref(), &opts)?;
     let elapsed = t0.elapsed().as_secs_f64();
-    io::write_stack(&a.output, &d.stack)?;
+    // The stack and its previews appear together, once all are written.
+    let mut staging = io::Staging::new();
+    staging.stack(&a.output, &d.stack)?;
     if !a.no_preview {
-        write_previews(&a.output, &d.stack)?;
+        write_previews(&mut staging, &a.output, &d.stack)?;
     }
+    staging.commit()?;
     if !a.quiet {
         for n in &d.notes {
             eprintln!("drbokeh: note: {n}");
@@ -191,7 +224,7 @@ fn sibling(output: &Path, suffix: &str) -> PathBuf {
 
 /// Per layer: colour over a checkerboard by alpha, and disparity (rescaled to the stack's
 /// disparity range) as 16-bit grey.
-fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
+fn write_previews(staging: &mut io::Staging, output: &Path, stack: &LayerStack<f32>) -> Result<()> {
     let (w, h) = (stack.width, stack.height);
     let (lo, hi) = stack
         .layers
@@ -212,7 +245,7 @@ fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
                 }
             }
         }
-        io::write_output(
+        staging.output(
             &sibling(output, &format!("layer{k}.png")),
             &over,
             BitDepth::Eight,
@@ -224,7 +257,7 @@ fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
             1,
             l.disparity.data.iter().map(|&d| (d - lo) / span).collect(),
         )?;
-        io::write_grey(&sibling(output, &format!("layer{k}.disparity.png")), &disp)?;
+        staging.grey(&sibling(output, &format!("layer{k}.disparity.png")), &disp)?;
     }
     Ok(())
 }

@@ -35,19 +35,27 @@ pub struct RenderArgs {
     pub output: PathBuf,
 
     /// Bits per channel for PNG and TIFF output.
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u8).range(8..=16))]
+    #[arg(long, default_value_t = 8, value_parser = crate::values::bit_depth)]
     pub bit_depth: u8,
 }
 
 pub fn run(a: &RenderArgs) -> Result<()> {
     // Fail on a bad output name before any work.
-    OutputFormat::from_path(&a.output)?;
-    if a.bit_depth != 8 && a.bit_depth != 16 {
+    let format = OutputFormat::from_path(&a.output)?;
+    if a.bit_depth == 16 && !matches!(format, OutputFormat::Png | OutputFormat::Tiff) {
         anyhow::bail!(
-            "invalid parameter --bit-depth: must be 8 or 16, got {}",
-            a.bit_depth
+            "invalid parameter --bit-depth: 16 bits need a .png or .tif output; {} is {}",
+            a.output.display(),
+            match format {
+                OutputFormat::Jpeg => "JPEG (8 bits only)",
+                _ => "floating point (no bit depth)",
+            }
         );
     }
+    crate::outputs::plan_for_scene(&a.scene, &a.camera)
+        .file(&a.output, "--output", crate::outputs::RENDER_EXTENSIONS)
+        .check()?;
+    drbokeh::budget::set_work_kind(drbokeh::budget::WorkKind::new(a.exec.f64, false));
     a.exec.init_threads()?;
     if a.exec.f64 {
         run_typed::<f64>(a)

@@ -47,16 +47,11 @@ pub struct VjpArgs {
 }
 
 pub fn run(a: &VjpArgs) -> Result<()> {
-    if !a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npz"))
-    {
-        bail!(
-            "{}: the gradient output must be an .npz file",
-            a.output.display()
-        );
-    }
+    crate::outputs::plan_for_scene(&a.scene, &a.camera)
+        .input(&a.grad_output, "--grad-output")
+        .file(&a.output, "--output", &["npz"])
+        .check()?;
+    drbokeh::budget::set_work_kind(drbokeh::budget::WorkKind::new(a.exec.f64, true));
     a.exec.engine()?;
     a.exec.init_threads()?;
     if a.exec.f64 {

@@ -16,6 +16,7 @@
 
 pub mod aperture;
 pub mod bench;
+pub mod budget;
 pub mod camera;
 pub mod demo;
 pub mod dfd;
