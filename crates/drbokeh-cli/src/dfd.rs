@@ -122,6 +122,13 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     let (weights, terms) = LossWeights::from_terms(&a.losses)?;
     o.weights = weights;
     o.terms = terms;
+    let (w, h) = io::image_dimensions(&a.all_in_focus, "image")?;
+    drbokeh::budget::check_work(
+        &a.all_in_focus.display().to_string(),
+        w as u64,
+        h as u64,
+        drbokeh::budget::DFD_WORK_LAYERS,
+    )?;
     let aif = io::read_rgb::<f32>(&a.all_in_focus)?;
     let target = io::read_rgb::<f32>(&a.defocused)?;
     if (aif.width, aif.height) != (target.width, target.height) {

@@ -36,7 +36,7 @@ struct Cli {
     /// Input budget in megapixel-layers (width x height x layers / 10^6; f64 counts twice,
     /// a gradient tape four times): every input's size is checked from its header against
     /// it before anything is read. Default 128 (env DRBOKEH_MAX_MEGAPIXELS); raise it if you
-    /// have the memory (about 80 bytes per pixel-layer; see docs/limits.md).
+    /// have the memory (at most 96 bytes per pixel-layer; see docs/limits.md).
     #[arg(long, global = true, value_name = "MP", value_parser = values::positive_f64)]
     max_megapixels: Option<f64>,
 }

@@ -423,10 +423,11 @@ mod tests {
 
     #[test]
     fn parses_numpy_headers_and_rejects_malformed_ones() {
-        let h = header("{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), }  \n").unwrap();
+        let text = "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), }  \n";
+        let h = header(text).unwrap();
         assert_eq!(
             (h.dtype, h.shape.clone(), h.data_offset),
-            (Dtype::F32, vec![3, 4], 10 + 63)
+            (Dtype::F32, vec![3, 4], 10 + text.len() as u64)
         );
         let h = header("{'descr': '>u2', 'fortran_order': True, 'shape': (5,)}").unwrap();
         assert!(h.big_endian && h.fortran_order && h.shape == vec![5]);
@@ -448,6 +449,36 @@ mod tests {
         }
         let huge = header("{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 4294967296)}").unwrap();
         assert_eq!(huge.len(), u64::MAX);
+    }
+
+    #[test]
+    fn reads_what_ndarray_npy_writes_in_either_order_and_dtype() {
+        use ndarray_npy::WriteNpyExt;
+        let dir = tempfile::tempdir().unwrap();
+        let a = ndarray::Array2::from_shape_fn((3, 5), |(y, x)| (10 * y + x) as f64);
+        let want: Vec<f64> = a.iter().copied().collect();
+        let path = dir.path().join("a.npy");
+        let check = |path: &Path| {
+            let (mut r, h) = open_npy(path).unwrap();
+            assert_eq!(h.shape, vec![3, 5]);
+            read_data::<f64, _>(&mut r, &h).unwrap()
+        };
+        a.write_npy(std::fs::File::create(&path).unwrap()).unwrap();
+        assert_eq!(check(&path), want);
+        // Column-major: the transpose of a (5, 3) array is (3, 5) in Fortran order.
+        let f = a.t().as_standard_layout().into_owned().reversed_axes();
+        assert!(!f.is_standard_layout() && f == a);
+        f.write_npy(std::fs::File::create(&path).unwrap()).unwrap();
+        assert_eq!(check(&path), want);
+        a.mapv(|v| v as f32)
+            .write_npy(std::fs::File::create(&path).unwrap())
+            .unwrap();
+        assert_eq!(check(&path), want);
+        a.mapv(|v| (v * 1000.0) as u16)
+            .write_npy(std::fs::File::create(&path).unwrap())
+            .unwrap();
+        let scaled: Vec<f64> = want.iter().map(|v| v * 1000.0 / 65535.0).collect();
+        assert_eq!(check(&path), scaled);
     }
 
     #[test]

@@ -37,18 +37,13 @@ struct Identity {
 }
 
 fn identity(p: &Path) -> Identity {
-    let inode = std::fs::metadata(p).ok().and_then(|m| {
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::MetadataExt;
-            Some((m.dev(), m.ino()))
-        }
-        #[cfg(not(unix))]
-        {
-            let _ = m;
-            None
-        }
-    });
+    #[cfg(unix)]
+    let inode = {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
+    };
+    #[cfg(not(unix))]
+    let inode = None;
     let canonical = std::fs::canonicalize(p).ok().or_else(|| {
         let name = p.file_name()?;
         std::fs::canonicalize(parent_dir(p))
@@ -137,7 +132,7 @@ impl OutputPlan {
                 ));
             }
             let e = ext(path);
-            if !exts.is_empty() && !exts.iter().any(|x| *x == e) {
+            if !exts.is_empty() && !exts.contains(&e) {
                 return Err(Error::file(
                     path,
                     format!(

@@ -181,7 +181,7 @@ pub(crate) fn commit(
     let mut reg = lock();
     if reg.closed {
         return Err(Error::file(
-            &moves.first().map(|m| m.1.clone()).unwrap_or_default(),
+            moves.first().map(|m| m.1.clone()).unwrap_or_default(),
             "interrupted before the output was complete",
         ));
     }
