@@ -11,6 +11,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+/// The binary under test: this build's, or `DRBOKEH_TEST_BIN` (to run the cases against
+/// another build, e.g. the one before the fixes).
+fn bin() -> String {
+    std::env::var("DRBOKEH_TEST_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_drbokeh").into())
+}
+
 /// Address-space cap for the child processes below: far above what any of these
 /// inputs needs when handled correctly, far below what their headers claim.
 const ADDRESS_SPACE_CAP: u64 = 2 << 30;
@@ -41,7 +47,7 @@ fn run_within(args: &[&str], limit: Duration) -> Output {
 }
 
 fn command(args: &[&str]) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_drbokeh"));
+    let mut c = Command::new(bin());
     c.args(args).env("MALLOC_ARENA_MAX", "1");
     unsafe {
         c.pre_exec(|| {
@@ -320,7 +326,9 @@ fn case2_zip_bomb_stack_is_refused_from_its_headers() {
     assert!(std::fs::metadata(&bomb).unwrap().len() < 1 << 20);
     let out = d.path("out.png");
     let t = Instant::now();
-    let o = run(&[
+    // The budget from the environment (DRBOKEH_MAX_MEGAPIXELS; --max-megapixels is tested
+    // by the nits below).
+    let o = command(&[
         "render",
         "--layers",
         p(&bomb),
@@ -328,9 +336,10 @@ fn case2_zip_bomb_stack_is_refused_from_its_headers() {
         "0.5",
         "-o",
         p(&out),
-        "--max-megapixels",
-        "8",
-    ]);
+    ])
+    .env("DRBOKEH_MAX_MEGAPIXELS", "8")
+    .output()
+    .unwrap();
     expect(
         &o,
         1,
@@ -1057,6 +1066,24 @@ fn nits_usage_errors_exit_2_with_the_option_named() {
     expect(&o, 2, &["--bit-depth", "o.jpg", "JPEG"]);
     let o = run(&["render", "--demo", "--threads", "0", "-o", p(&out)]);
     expect(&o, 2, &["--threads"]);
+    // The budget flag: a bad value is a usage error; a small budget refuses the demo.
+    let o = with(&["--max-megapixels", "0", "-o", p(&out)]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let o = run(&[
+        "render",
+        "--demo",
+        "--demo-size",
+        "200x100",
+        "--max-megapixels",
+        "0.05",
+        "-o",
+        p(&out),
+    ]);
+    expect(
+        &o,
+        1,
+        &["--demo-size", "200x100 x 3 layer(s)", "budget 0.05"],
+    );
     // dfd-eval names its own option.
     let o = run(&["dfd-eval", "--layers", "foo", "--out", p(&d.path("r"))]);
     expect(&o, 2, &["--layers", "unknown layer 'foo'"]);
