@@ -4,6 +4,9 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use drbokeh::io::{self, BitDepth, DepthKind, DisparityOptions};
 use drbokeh::layering::{self, LayeringOptions};
+use drbokeh::model::Tone;
+use drbokeh::presets::Transfer;
+use drbokeh::scene::{self, Photo, PhotoFiles};
 use drbokeh::{Image, LayerStack};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -113,41 +116,31 @@ pub fn run(a: &LayersArgs) -> Result<()> {
             .build_global()
             .context("cannot start the thread pool")?;
     }
-    let (map_path, kind) = match (&a.disparity, &a.depth) {
+    let (map, kind) = match (&a.disparity, &a.depth) {
         (Some(p), None) => (p, DepthKind::Disparity),
         (None, Some(p)) => (p, DepthKind::Depth),
         _ => bail!(
             "drbokeh layers needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"
         ),
     };
-    let mut rgb: Image<f32> = io::read_rgb(&a.image)?;
-    if a.image
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
-    {
-        // Linear EXR colour: display-encode with the default transfer (gamma 2.2).
-        for v in rgb.data.iter_mut() {
-            *v = drbokeh::model::encode(*v as f64, 2.2, 0.0).max(0.0) as f32;
-        }
-    }
-    let disparity: Image<f32> = io::read_disparity(
-        map_path,
-        DisparityOptions {
+    let files = PhotoFiles {
+        map_options: DisparityOptions {
             kind,
             normalize: !a.no_normalize,
         },
-    )?;
-    crate::args::check_same_size(&a.image, &rgb, map_path, &disparity)?;
-    let matte: Option<Image<f32>> = match &a.alpha {
-        Some(p) => {
-            let m = io::read_matte(p)?;
-            crate::args::check_same_size(&a.image, &rgb, p, &m)?;
-            Some(m)
-        }
-        None => None,
+        matte: a.alpha.clone(),
+        ..PhotoFiles::new(&a.image, map, kind)
     };
+    // Linear EXR colour is display-encoded with the default transfer (gamma 2.2).
+    let tone = Tone::new(Transfer::Gamma, 2.2, 0.0);
+    let photo: Photo<f32> = scene::read_photo(&files, &tone)?;
     let t0 = Instant::now();
-    let d = layering::decompose(&rgb, &disparity, matte.as_ref(), &opts)?;
+    let d = layering::decompose(
+        &photo.rgb_encoded,
+        &photo.disparity,
+        photo.matte.as_ref(),
+        &opts,
+    )?;
     let elapsed = t0.elapsed().as_secs_f64();
     io::write_stack(&a.output, &d.stack)?;
     if !a.no_preview {

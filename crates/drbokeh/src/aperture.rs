@@ -114,11 +114,11 @@ impl Aperture {
                 let parts: Vec<&str> = s.split(':').collect();
                 if parts[0] == "polygon" && (2..=3).contains(&parts.len()) {
                     let blades: u32 = parts[1].parse().map_err(|_| {
-                        Error::param("--aperture", format!("bad blade count in '{s}'"))
+                        Error::param("aperture", format!("bad blade count in '{s}'"))
                     })?;
                     let rotation_deg: f64 = match parts.get(2) {
                         Some(r) => r.parse().map_err(|_| {
-                            Error::param("--aperture", format!("bad rotation in '{s}'"))
+                            Error::param("aperture", format!("bad rotation in '{s}'"))
                         })?,
                         None => 0.0,
                     };
@@ -130,7 +130,7 @@ impl Aperture {
                     Ok(a)
                 } else {
                     Err(Error::param(
-                        "--aperture",
+                        "aperture",
                         format!(
                             "unknown aperture '{s}': use circle, polygon:N[:DEG], hexagon, ... or kernel:IMAGE"
                         ),
@@ -149,12 +149,12 @@ impl Aperture {
         {
             if !(3..=64).contains(blades) {
                 return Err(Error::param(
-                    "--aperture",
+                    "aperture",
                     format!("polygon needs 3 to 64 blades, got {blades}"),
                 ));
             }
             if !rotation_deg.is_finite() {
-                return Err(Error::param("--aperture", "rotation must be finite"));
+                return Err(Error::param("aperture", "rotation must be finite"));
             }
         }
         Ok(())

@@ -29,6 +29,7 @@ pub mod loss;
 pub mod model;
 pub mod presets;
 mod real;
+pub mod scene;
 pub mod stack;
 pub mod trace;
 

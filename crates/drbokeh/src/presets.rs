@@ -47,6 +47,9 @@ pub enum Footprint {
 }
 
 impl Footprint {
+    /// The largest footprint of any variant ([`Footprint::Pixel`]), in pixels.
+    pub const LARGEST_PX: f64 = 1.0;
+
     /// The footprint in pixels.
     pub fn px(self) -> f64 {
         match self {
@@ -170,7 +173,7 @@ impl std::str::FromStr for Preset {
             "paper" => Ok(Preset::Paper),
             "physical" => Ok(Preset::Physical),
             _ => Err(Error::param(
-                "--preset",
+                "preset",
                 format!(
                     "unknown preset '{s}' (available: {})",
                     Preset::ALL

@@ -33,7 +33,7 @@ impl std::str::FromStr for Engine {
             "threaded" => Ok(Engine::Threaded),
             "fast" => Ok(Engine::Fast),
             _ => Err(crate::Error::param(
-                "--engine",
+                "engine",
                 format!("unknown engine '{s}' (available: fast, threaded, reference)"),
             )),
         }

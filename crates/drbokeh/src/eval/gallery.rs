@@ -172,7 +172,7 @@ fn render_one(
         }
         Method::LayeredGt | Method::PaperGt | Method::PhysicalGt => {
             return Err(Error::param(
-                "--methods",
+                "methods",
                 format!(
                     "method '{}' needs a ground-truth layer stack; the gallery has image + disparity only",
                     method.name()
@@ -194,17 +194,17 @@ pub fn make_gallery(
 ) -> Result<()> {
     if options.focal_planes == 0 || options.focal_planes > 100 {
         return Err(Error::param(
-            "--focal-planes",
+            "focal_planes",
             format!("must be between 1 and 100, got {}", options.focal_planes),
         ));
     }
     if options.methods.is_empty() {
-        return Err(Error::param("--methods", "no method given"));
+        return Err(Error::param("methods", "no method given"));
     }
     for m in &options.methods {
         if m.input() != MethodInput::AifDisparity {
             return Err(Error::param(
-                "--methods",
+                "methods",
                 format!(
                     "method '{}' needs a ground-truth layer stack; the gallery has image + disparity only",
                     m.name()

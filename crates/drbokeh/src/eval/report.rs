@@ -157,7 +157,7 @@ impl Method {
             }
         }
         if out.is_empty() {
-            return Err(Error::param("--methods", "no method given"));
+            return Err(Error::param("methods", "no method given"));
         }
         Ok(out)
     }
@@ -171,7 +171,7 @@ impl std::str::FromStr for Method {
             .find(|m| m.name() == s)
             .ok_or_else(|| {
                 Error::param(
-                    "--methods",
+                    "methods",
                     format!(
                         "unknown method '{s}' (available: {}, or all)",
                         Method::ALL.map(|m| m.name()).join(", ")

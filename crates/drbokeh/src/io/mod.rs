@@ -9,6 +9,7 @@ mod raster;
 
 pub use depth::{read_disparity, DepthKind, DisparityOptions};
 pub use npz::{read_stack, write_gradients, write_stack};
+pub(crate) use raster::is_linear;
 pub use raster::{
     read_grey, read_matte, read_npy_image, read_rgb, write_grey, write_output, BitDepth,
     OutputFormat,
