@@ -11,7 +11,7 @@
 //!   `S(1 - dist)` so that a ring-shaped kernel still lights in-focus pixels.
 
 use crate::image::Image;
-use crate::{Error, Real, Result};
+use crate::{Error, Result};
 
 /// The shape of the lens aperture (and so of the bokeh).
 #[derive(Clone, Debug, PartialEq, Default)]
@@ -61,6 +61,11 @@ impl KernelImage {
             height: grey.height,
             values: grey.data.iter().map(|v| v / max).collect(),
         })
+    }
+
+    /// Width and height in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
     }
 
     /// Bilinear sample at normalised coordinates (u, v) in [-1, 1] (longer side), 0 outside.
@@ -179,39 +184,6 @@ impl Aperture {
                 dist * delta.cos() / half.cos()
             }
             _ => dist,
-        }
-    }
-}
-
-/// The aperture prepared for evaluation in float type `T`.
-#[derive(Clone, Debug)]
-pub(crate) enum ApertureEval<T> {
-    /// Circle and polygon: `S(r - gauge)`, the gauge precomputed per tap.
-    Gauge,
-    /// A kernel image.
-    Kernel(KernelImage, std::marker::PhantomData<T>),
-}
-
-impl<T: Real> ApertureEval<T> {
-    /// Distance beyond which a source of radius `r` contributes at most the soft step's
-    /// dropped tail ([`crate::model::SCATTER_TAIL_PX`]): the polygon lies inside the
-    /// circle (its gauge is at least the distance), and a kernel reaches the corner of its
-    /// square, `sqrt(2) r`, plus one texel of bilinear support.
-    pub(crate) fn reach_px(&self, radius_px: f64) -> f64 {
-        let tail = crate::model::SCATTER_TAIL_PX;
-        match self {
-            ApertureEval::Gauge => radius_px + tail,
-            ApertureEval::Kernel(k, _) => {
-                let texel = 2.0 / k.width.max(k.height) as f64;
-                (std::f64::consts::SQRT_2 * radius_px * (1.0 + texel) + 1.0).max(1.0 + tail)
-            }
-        }
-    }
-
-    pub(crate) fn new(a: &Aperture) -> Self {
-        match a {
-            Aperture::Kernel(k) => ApertureEval::Kernel(k.clone(), std::marker::PhantomData),
-            _ => ApertureEval::Gauge,
         }
     }
 }

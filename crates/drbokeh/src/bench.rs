@@ -3,7 +3,7 @@
 //! one run, with taps visited, throughput and the largest difference in linear light.
 
 use crate::demo;
-use crate::engine::adjoint::render_with_tape_on;
+use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
 use crate::presets::RenderSettings;

@@ -75,15 +75,6 @@ impl Window {
         Window::automatic(max_radius_px, WindowCap::Unclipped)
     }
 
-    /// The scatter radius an automatic window must hold for a stack whose largest
-    /// relative disparity (over pixels with alpha > 0) is `max_defocus`:
-    /// `K max|d| + 1`, with the largest pixel footprint of any preset
-    /// ([`crate::presets::Footprint::LARGEST_PX`]), so that one window serves every preset
-    /// and method compared on a scene.
-    pub fn largest_scatter_radius_px(blur_k: f64, max_defocus: f64) -> f64 {
-        blur_k.abs() * max_defocus + crate::presets::Footprint::LARGEST_PX
-    }
-
     /// When this (automatic) window clips a blur of scatter radius `max_radius_px` (plus
     /// the margin): the window size that would hold it.
     pub fn clips(&self, max_radius_px: f64) -> Option<usize> {

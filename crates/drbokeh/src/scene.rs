@@ -18,7 +18,7 @@
 //!   least 0.5 at that pixel; [`Focus::Auto`] is the demo's subject for the demo and the
 //!   centre pixel otherwise.
 //! - **Window.** Without an explicit size, the automatic window ([`Window::automatic`])
-//!   holds the largest scatter radius of the stack; it is capped at
+//!   holds the largest scatter radius of the stack ([`model::largest_scatter_radius_px`]); it is capped at
 //!   [`crate::camera::MAX_AUTO_WINDOW_SIZE`] except for the fast engine, whose cost follows
 //!   the blur radii rather than the window, and a note says when the cap clips the blur.
 //! - **Photos.** An image and a disparity map are decomposed into depth layers for the
@@ -38,7 +38,7 @@ use crate::engine::Engine;
 use crate::image::{check_dimensions, Image};
 use crate::io::{self, DepthKind, DisparityOptions};
 use crate::layering::{self, LayeringOptions};
-use crate::model::Tone;
+use crate::model::{self, Tone};
 use crate::presets::{Preset, RenderSettings};
 use crate::stack::{Layer, LayerStack};
 use crate::{Error, Real, Result};
@@ -227,7 +227,7 @@ impl View {
                 Window::automatic(1.0, WindowCap::Clipped)
             }
             None => {
-                let needed = Window::largest_scatter_radius_px(self.blur_k, max_defocus(focus));
+                let needed = model::largest_scatter_radius_px(self.blur_k, max_defocus(focus));
                 let cap = if engine == Engine::Fast {
                     WindowCap::Unclipped
                 } else {

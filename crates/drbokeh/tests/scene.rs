@@ -6,7 +6,7 @@ use common::random_stack;
 use drbokeh::camera::{WindowCap, MAX_AUTO_WINDOW_SIZE};
 use drbokeh::layering::{layers_from_disparity, LayeringOptions};
 use drbokeh::scene::{self, Focus, Layering, Photo, PhotoFiles, Source, View};
-use drbokeh::{Aperture, Engine, Error, Image, Layer, LayerStack, Preset, Window};
+use drbokeh::{Aperture, Engine, Error, Image, Layer, LayerStack, Preset};
 
 /// A two-depth photo: a near square (disparity 0.9) on a far ramp (0.1 .. 0.2).
 fn photo(w: usize, h: usize) -> (Image<f32>, Image<f32>) {
@@ -121,10 +121,7 @@ fn the_automatic_window_holds_the_largest_blur_and_says_when_it_is_capped() {
     assert_eq!(s.settings.camera.window.radius_px(), 12);
     assert_eq!(
         s.settings.camera.window,
-        Window::automatic(
-            Window::largest_scatter_radius_px(10.0, stack.max_defocus(0.1)),
-            WindowCap::Clipped
-        )
+        drbokeh::model::automatic_window(10.0, stack.max_defocus(0.1), WindowCap::Clipped)
     );
     assert!(s.notes.is_empty(), "{:?}", s.notes);
     // K 100: radius 81 + 3 exceeds the cap of L = 71 except on the fast engine.
