@@ -116,11 +116,11 @@ pub fn render_with_tape_on<T: Real>(
     Ok(match engine {
         Engine::Reference | Engine::Threaded => {
             let (img, tape) = threaded::forward::render_with_tape(stack, settings, progress);
-            (img, Tape::new(Box::new(tape)))
+            (img, Tape::new(settings, Engine::Threaded, Box::new(tape)))
         }
         Engine::Fast => {
             let (img, tape) = fast::adjoint::render_with_tape(stack, settings, progress);
-            (img, Tape::new(Box::new(tape)))
+            (img, Tape::new(settings, Engine::Fast, Box::new(tape)))
         }
     })
 }

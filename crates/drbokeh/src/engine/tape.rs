@@ -9,10 +9,6 @@ use crate::{Real, Result};
 
 /// A schedule's recording of a forward pass, able to run its backward pass.
 pub(crate) trait Backward<T>: Send + Sync {
-    /// The settings the forward pass used.
-    fn settings(&self) -> &RenderSettings;
-    /// The schedule the backward pass runs on.
-    fn engine(&self) -> Engine;
     /// Back-propagates `grad_output` to every input.
     fn backward(&self, grad_output: &Image<T>, progress: &dyn Progress) -> Result<Gradients<T>>;
 }
@@ -20,24 +16,34 @@ pub(crate) trait Backward<T>: Send + Sync {
 /// Everything the backward pass needs, recorded by [`crate::render_with_tape`] or
 /// [`crate::render_with_tape_on`].
 pub struct Tape<T> {
+    settings: RenderSettings,
+    engine: Engine,
     inner: Box<dyn Backward<T>>,
 }
 
 impl<T: Real> Tape<T> {
-    /// Wraps a schedule's recording.
-    pub(crate) fn new(inner: Box<dyn Backward<T>>) -> Self {
-        Tape { inner }
+    /// Wraps the recording of schedule `engine` made with `settings`.
+    pub(crate) fn new(
+        settings: &RenderSettings,
+        engine: Engine,
+        inner: Box<dyn Backward<T>>,
+    ) -> Self {
+        Tape {
+            settings: settings.clone(),
+            engine,
+            inner,
+        }
     }
 
     /// The settings this tape was recorded with.
     pub fn settings(&self) -> &RenderSettings {
-        self.inner.settings()
+        &self.settings
     }
 
     /// The schedule the backward pass runs on: [`Engine::Threaded`] (exact) or
     /// [`Engine::Fast`].
     pub fn engine(&self) -> Engine {
-        self.inner.engine()
+        self.engine
     }
 
     /// Back-propagates `grad_output` (d loss / d output, shaped like the rendered image)

@@ -64,33 +64,12 @@ impl<T: Real> ApertureEval<T> {
 }
 
 /// The soft scatter term of a tap for a source of radius `r` under the given aperture:
-/// `S(r - gauge)` for circle and polygon, the kernel image for a kernel aperture.
+/// `S(r - gauge)` for circle and polygon, the kernel image sampled at `(dx, dy) / r` and
+/// unioned with the in-focus footprint for a kernel aperture; with `DERIV`, also its
+/// derivative with respect to `r` (else 0).
 #[inline(always)]
-pub(crate) fn scatter_term<T: Real>(
-    step: ScatterStep,
-    aperture: &ApertureEval<T>,
-    dx: isize,
-    dy: isize,
-    dist: T,
-    gauge: T,
-    radius_y_px: T,
-) -> T {
-    match aperture {
-        ApertureEval::Gauge => scatter_step(step, radius_y_px - gauge),
-        ApertureEval::Kernel(k, _) => {
-            let r = radius_y_px.f64().max(MIN_COVERAGE_RADIUS_PX);
-            let shape = T::c(k.sample(dx as f64 / r, dy as f64 / r));
-            shape.max(scatter_step(
-                step,
-                kernel_footprint_radius_px::<T>(step) - dist,
-            ))
-        }
-    }
-}
-
-/// [`scatter_term`] and its derivative with respect to the source radius `r`.
-#[inline(always)]
-pub(crate) fn scatter_term_with_derivative<T: Real>(
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn scatter_term_and<T: Real, const DERIV: bool>(
     step: ScatterStep,
     aperture: &ApertureEval<T>,
     dx: isize,
@@ -102,7 +81,12 @@ pub(crate) fn scatter_term_with_derivative<T: Real>(
     match aperture {
         ApertureEval::Gauge => {
             let s = scatter_step(step, radius_y_px - gauge);
-            (s, scatter_step_derivative(step, s))
+            let ds = if DERIV {
+                scatter_step_derivative(step, s)
+            } else {
+                T::zero()
+            };
+            (s, ds)
         }
         ApertureEval::Kernel(k, _) => {
             let r = radius_y_px.f64().max(MIN_COVERAGE_RADIUS_PX);
@@ -111,15 +95,31 @@ pub(crate) fn scatter_term_with_derivative<T: Real>(
             let footprint = scatter_step(step, kernel_footprint_radius_px::<T>(step) - dist);
             if T::c(shape) >= footprint {
                 // d/dr k(dx/r, dy/r) = -(du * dx + dv * dy) / r^2
-                (
-                    T::c(shape),
-                    T::c(-(du * dx as f64 + dv * dy as f64) / (r * r)),
-                )
+                let ds = if DERIV {
+                    T::c(-(du * dx as f64 + dv * dy as f64) / (r * r))
+                } else {
+                    T::zero()
+                };
+                (T::c(shape), ds)
             } else {
                 (footprint, T::zero())
             }
         }
     }
+}
+
+/// The scatter term of a tap ([`scatter_term_and`] without the derivative).
+#[inline(always)]
+pub(crate) fn scatter_term<T: Real>(
+    step: ScatterStep,
+    aperture: &ApertureEval<T>,
+    dx: isize,
+    dy: isize,
+    dist: T,
+    gauge: T,
+    radius_y_px: T,
+) -> T {
+    scatter_term_and::<T, false>(step, aperture, dx, dy, dist, gauge, radius_y_px).0
 }
 
 /// Tap weight `c(y,x) = a(y) M S(y,x) / A(y) O(y,x)` (M already applied by the caller).

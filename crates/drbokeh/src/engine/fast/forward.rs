@@ -6,7 +6,7 @@
 //! the composite used plus the ring out to the adjoint's longer reach, so a render with or
 //! without recording gives the same bytes.
 
-use super::runs::{disc_sums, gather_run, gather_run_kernel, LaneReduction};
+use super::runs::{centre_scatter, disc_sums, gather_segment, LaneReduction};
 use super::tiles::{
     backward_reach, source_block_max, tile_max_radius, WindowTables, BAND_ROWS,
     FOCUS_WEIGHT_CUTOFF, TILE, TILE_ROWS,
@@ -219,7 +219,7 @@ fn render_band_layer<T: Real>(
         };
         for y in tile_y0..tile_y1 {
             for x in tile_x0..tile_x1 {
-                let xi = (y + big_r) * b.stride + x + big_r;
+                let xi = b.index(x, y);
                 let (d_x, e_x) = (b.rel_disp[xi], b.focus_weight[xi]);
                 let mut acc = [T::zero(); 3];
                 let mut weight = T::zero();
@@ -230,32 +230,19 @@ fn render_band_layer<T: Real>(
                             continue;
                         };
                         let row = (xi as isize + dy * b.stride as isize) as usize;
-                        let gauge_row = &tables.gauge[(dy + big_r as isize) as usize];
-                        let lo = row - hw;
-                        let g0 = big_r - hw;
                         let n = 2 * hw + 1;
                         taps += n as u64;
-                        let (sums, wsum) = match aperture {
-                            ApertureEval::Gauge => {
-                                gather_run(b, lo, n, &gauge_row[g0..g0 + n], d_x, e_x, occluding)
-                            }
-                            ApertureEval::Kernel(..) => {
-                                let dist_row = &tables.dist[(dy + big_r as isize) as usize];
-                                gather_run_kernel(
-                                    b,
-                                    aperture,
-                                    lo,
-                                    n,
-                                    dy,
-                                    -(hw as isize),
-                                    &gauge_row[g0..g0 + n],
-                                    &dist_row[g0..g0 + n],
-                                    d_x,
-                                    e_x,
-                                    occluding,
-                                )
-                            }
-                        };
+                        let (sums, wsum) = gather_segment(
+                            b,
+                            tables,
+                            aperture,
+                            row - hw,
+                            n,
+                            (-(hw as isize), dy),
+                            d_x,
+                            e_x,
+                            occluding,
+                        );
                         for c in 0..3 {
                             acc[c] = acc[c] + sums[c];
                         }
@@ -263,21 +250,7 @@ fn render_band_layer<T: Real>(
                         if dy == 0 && occluding {
                             // The centre tap has O = 1; the run used O(x,x) = 1 + e (s(0) - 1).
                             let a = b.alpha[xi];
-                            let sc = match aperture {
-                                ApertureEval::Gauge => model::scatter_step_fast(
-                                    b.step,
-                                    b.radius[xi] - gauge_row[big_r],
-                                ),
-                                ApertureEval::Kernel(..) => model::scatter_term(
-                                    b.step,
-                                    aperture,
-                                    0,
-                                    0,
-                                    T::zero(),
-                                    T::zero(),
-                                    b.radius[xi],
-                                ),
-                            };
+                            let (sc, _) = centre_scatter(b.step, aperture, b.radius[xi]);
                             let base = model::tap_weight_inv_area(a, sc, b.inv_area[xi], T::one());
                             let o_run = model::occlusion_fast(e_x, d_x, d_x);
                             let fix = base * (T::one() - o_run);
@@ -375,24 +348,8 @@ fn gather_ring<T: Real>(
             }
             let n = (to - from + 1) as usize;
             let lo = (row as isize + from) as usize;
-            let g0 = (from + big_r as isize) as usize;
-            let gauge = &tables.gauge[t][g0..g0 + n];
-            let (sums, wsum) = match aperture {
-                ApertureEval::Gauge => gather_run(b, lo, n, gauge, d_x, e_x, occluding),
-                ApertureEval::Kernel(..) => gather_run_kernel(
-                    b,
-                    aperture,
-                    lo,
-                    n,
-                    dy,
-                    from,
-                    gauge,
-                    &tables.dist[t][g0..g0 + n],
-                    d_x,
-                    e_x,
-                    occluding,
-                ),
-            };
+            let (sums, wsum) =
+                gather_segment(b, tables, aperture, lo, n, (from, dy), d_x, e_x, occluding);
             for c in 0..3 {
                 acc[c] = acc[c] + sums[c];
             }

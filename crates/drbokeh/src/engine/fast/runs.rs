@@ -8,6 +8,23 @@ use crate::engine::planes::Planes;
 use crate::model::{self, ApertureEval, DiscCoverage, ScatterStep};
 use crate::Real;
 
+/// Calls `add(lane, i)` for every `i in 0..m` with `lane = i % LANES`, in order of `i`:
+/// the full groups of [`LANES`] first (a loop the compiler vectorises), then the rest.
+/// Summing `x[i]` into `lanes[lane]` this way fixes the order of every float sum, so the
+/// result does not depend on the vector width.
+#[inline(always)]
+pub(super) fn for_each_lane(m: usize, mut add: impl FnMut(usize, usize)) {
+    let full = m / LANES * LANES;
+    for base in (0..full).step_by(LANES) {
+        for l in 0..LANES {
+            add(l, base + l);
+        }
+    }
+    for i in full..m {
+        add(i - full, i);
+    }
+}
+
 /// Sum of [`LANES`] partial sums, in lane order.
 #[inline(always)]
 pub(super) fn lane_sum<T: Real>(v: &[T; LANES]) -> T {
@@ -17,33 +34,6 @@ pub(super) fn lane_sum<T: Real>(v: &[T; LANES]) -> T {
 /// Accumulator lanes of the gather run: independent partial sums that the compiler can
 /// keep in one SIMD register each (float sums cannot be reordered otherwise).
 pub(super) const LANES: usize = 8;
-
-/// Sums `c(y,x) Ilin(y)` and `c(y,x)` over a contiguous run of `n` sources starting at
-/// padded index `lo`, with the run's gauges. Branch-free body in [`LANES`] lanes
-/// (vectorisable); the lane order is fixed, so results do not depend on threads.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-pub(super) fn gather_run<T: Real>(
-    b: &Planes<T>,
-    lo: usize,
-    n: usize,
-    gauge: &[T],
-    d_x: T,
-    e_x: T,
-    occluding: bool,
-) -> ([T; 3], T) {
-    // The step shape and occlusion are loop-invariant: one monomorphised loop each.
-    match (b.step, occluding) {
-        (ScatterStep::Paper, true) => gather_run_lanes::<T, true, false>(b, lo, n, gauge, d_x, e_x),
-        (ScatterStep::Paper, false) => {
-            gather_run_lanes::<T, false, false>(b, lo, n, gauge, d_x, e_x)
-        }
-        (ScatterStep::Sharp, true) => gather_run_lanes::<T, true, true>(b, lo, n, gauge, d_x, e_x),
-        (ScatterStep::Sharp, false) => {
-            gather_run_lanes::<T, false, true>(b, lo, n, gauge, d_x, e_x)
-        }
-    }
-}
 
 /// One tap's weight `c(y,x)` in the fast engine's form; `OCCLUDING = false` means `O = 1`;
 /// `SHARP` selects [`ScatterStep::Sharp`] (else the paper's step).
@@ -75,6 +65,8 @@ fn tap_weight_fast<T: Real, const OCCLUDING: bool, const SHARP: bool>(
 /// scratch array (a plain map, which the compiler vectorises), then reduced in lanes.
 pub(super) const CHUNK: usize = 64;
 
+/// Sums `c(y,x) Ilin(y)` and `c(y,x)` over a contiguous run of `n` sources starting at
+/// padded index `lo`, with the run's gauges, in [`LANES`] lanes.
 #[inline(always)]
 fn gather_run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
     b: &Planes<T>,
@@ -119,44 +111,56 @@ fn gather_run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
             &b.blue[s0..s0 + m],
         );
         // Lane l sums the taps i with i % LANES == l (CHUNK is a multiple of LANES).
-        let full = m / LANES * LANES;
-        for base in (0..full).step_by(LANES) {
-            for l in 0..LANES {
-                let i = base + l;
-                lr[l] = lr[l] + c[i] * red[i];
-                lg[l] = lg[l] + c[i] * green[i];
-                lb[l] = lb[l] + c[i] * blue[i];
-                lw[l] = lw[l] + c[i];
-            }
-        }
-        for i in full..m {
-            let l = i - full;
+        for_each_lane(m, |l, i| {
             lr[l] = lr[l] + c[i] * red[i];
             lg[l] = lg[l] + c[i] * green[i];
             lb[l] = lb[l] + c[i] * blue[i];
             lw[l] = lw[l] + c[i];
-        }
+        });
         start += m;
     }
-    let sum = |v: [T; LANES]| v.iter().fold(T::zero(), |a, &b| a + b);
-    ([sum(lr), sum(lg), sum(lb)], sum(lw))
+    ([lane_sum(&lr), lane_sum(&lg), lane_sum(&lb)], lane_sum(&lw))
 }
 
-/// [`gather_run`] for kernel apertures (scalar scatter term from the model).
+/// The sums `sum c Ilin` and `sum c` of the run of `n` taps of window row `dy` from offset
+/// `dx0` (padded index `lo` of the first source), for any aperture: [`gather_run`] in
+/// lanes for circle and polygon ([`gather_run_lanes`], branch-free, vectorisable; the lane
+/// order is fixed, so results do not depend on threads); for kernel apertures, the model's
+/// scalar scatter term.
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub(super) fn gather_run_kernel<T: Real>(
+pub(super) fn gather_segment<T: Real>(
     b: &Planes<T>,
+    tables: &WindowTables<T>,
     aperture: &ApertureEval<T>,
     lo: usize,
     n: usize,
-    dy: isize,
-    dx0: isize,
-    gauge: &[T],
-    dist: &[f64],
+    (dx0, dy): (isize, isize),
     d_x: T,
     e_x: T,
     occluding: bool,
 ) -> ([T; 3], T) {
+    let big_r = tables.big_r as isize;
+    if let ApertureEval::Gauge = aperture {
+        let (t, g0) = ((dy + big_r) as usize, (dx0 + big_r) as usize);
+        let gauge = &tables.gauge[t][g0..g0 + n];
+        // The step shape and occlusion are loop-invariant: one monomorphised loop each
+        // (direct calls, so that each is inlined into its AVX2 or baseline caller).
+        return match (b.step, occluding) {
+            (ScatterStep::Paper, true) => {
+                gather_run_lanes::<T, true, false>(b, lo, n, gauge, d_x, e_x)
+            }
+            (ScatterStep::Paper, false) => {
+                gather_run_lanes::<T, false, false>(b, lo, n, gauge, d_x, e_x)
+            }
+            (ScatterStep::Sharp, true) => {
+                gather_run_lanes::<T, true, true>(b, lo, n, gauge, d_x, e_x)
+            }
+            (ScatterStep::Sharp, false) => {
+                gather_run_lanes::<T, false, true>(b, lo, n, gauge, d_x, e_x)
+            }
+        };
+    }
     let (mut acc, mut sw) = ([T::zero(); 3], T::zero());
     for i in 0..n {
         let yi = lo + i;
@@ -165,15 +169,7 @@ pub(super) fn gather_run_kernel<T: Real>(
             continue;
         }
         let dx = dx0 + i as isize;
-        let s = model::scatter_term(
-            b.step,
-            aperture,
-            dx,
-            dy,
-            T::c(dist[i]),
-            gauge[i],
-            b.radius[yi],
-        );
+        let (s, _) = tables.scatter_at::<false>(b.step, aperture, (dx, dy), b.radius[yi]);
         let o = if occluding {
             model::occlusion_fast(e_x, b.rel_disp[yi], d_x)
         } else {
@@ -265,30 +261,12 @@ pub(super) fn disc_sums<T: Real, const DERIV: bool>(
                 }
             }
             ApertureEval::Kernel(..) => {
-                let dist = &tables.dist[t][g0..g0 + n];
                 for i in 0..n {
                     let dx = i as isize - hw as isize;
+                    let (s, ds) = tables.scatter_at::<DERIV>(src.step, aperture, (dx, dy), r_c);
                     if DERIV {
-                        let (s, ds) = model::scatter_term_with_derivative(
-                            src.step,
-                            aperture,
-                            dx,
-                            dy,
-                            T::c(dist[i]),
-                            gauge[i],
-                            r_c,
-                        );
                         disc.add_with_derivative(s, ds * dr, alpha[i]);
                     } else {
-                        let s = model::scatter_term(
-                            src.step,
-                            aperture,
-                            dx,
-                            dy,
-                            T::c(dist[i]),
-                            gauge[i],
-                            r_c,
-                        );
                         disc.add(s, alpha[i]);
                     }
                 }
@@ -296,4 +274,22 @@ pub(super) fn disc_sums<T: Real, const DERIV: bool>(
         }
     }
     (disc, taps)
+}
+
+/// The scatter term of the centre tap and its derivative with respect to `r`.
+#[inline(always)]
+pub(super) fn centre_scatter<T: Real>(
+    step: ScatterStep,
+    aperture: &ApertureEval<T>,
+    r: T,
+) -> (T, T) {
+    match aperture {
+        ApertureEval::Gauge => {
+            let s = model::scatter_step_fast(step, r);
+            (s, model::scatter_step_derivative(step, s))
+        }
+        ApertureEval::Kernel(..) => {
+            model::scatter_term_and::<T, true>(step, aperture, 0, 0, T::zero(), T::zero(), r)
+        }
+    }
 }

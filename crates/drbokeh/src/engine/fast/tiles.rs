@@ -2,7 +2,7 @@
 //! the window's per-row tables, and the reach that bounds the taps of a tile.
 
 use crate::engine::planes::Planes;
-use crate::model::ApertureEval;
+use crate::model::{self, ApertureEval, ScatterStep};
 use crate::presets::RenderSettings;
 use crate::Real;
 use rayon::prelude::*;
@@ -67,10 +67,46 @@ impl<T: Real> WindowTables<T> {
         })
     }
 
+    /// The model's scatter term at window offset `(dx, dy)` (`y - x`) for a source (or
+    /// disc) of radius `radius_px`, with its derivative when `DERIV`: the scalar path of
+    /// kernel apertures.
+    #[inline(always)]
+    pub fn scatter_at<const DERIV: bool>(
+        &self,
+        step: ScatterStep,
+        aperture: &ApertureEval<T>,
+        (dx, dy): (isize, isize),
+        radius_px: T,
+    ) -> (T, T) {
+        let (dist, gauge) = self.geometry(dx, dy);
+        model::scatter_term_and::<T, DERIV>(step, aperture, dx, dy, dist, gauge, radius_px)
+    }
+
+    /// The distance and gauge of window offset `(dx, dy)`.
+    #[inline(always)]
+    pub fn geometry(&self, dx: isize, dy: isize) -> (T, T) {
+        let r = self.big_r as isize;
+        let (t, g) = ((dy + r) as usize, (dx + r) as usize);
+        (T::c(self.dist[t][g]), self.gauge[t][g])
+    }
+
     /// [`WindowTables::half_width`] of every row `dy = -R ..= R`.
     pub fn half_widths(&self, reach: f64) -> Vec<Option<usize>> {
         let r = self.big_r as isize;
         (-r..=r).map(|dy| self.half_width(dy, reach)).collect()
+    }
+
+    /// The offsets `(dx, dy)` of the window rows' taps within `half_widths`
+    /// ([`WindowTables::half_widths`]), row by row.
+    pub fn taps_within<'a>(
+        &self,
+        half_widths: &'a [Option<usize>],
+    ) -> impl Iterator<Item = (isize, isize)> + 'a {
+        let r = self.big_r as isize;
+        half_widths.iter().enumerate().flat_map(move |(t, hw)| {
+            let hw = hw.map_or(-1, |hw| hw as isize);
+            (-hw..=hw).map(move |dx| (dx, t as isize - r))
+        })
     }
 
     /// The tables of the flipped offsets: `[ddy + R][ddx + R]` holds the gauge of the tap

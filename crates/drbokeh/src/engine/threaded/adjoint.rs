@@ -15,7 +15,6 @@
 use super::kernel::Kernel;
 use crate::engine::backward::{self, fold_padded, LayerPartials, ReceiverGrads};
 use crate::engine::planes::Planes;
-use crate::engine::schedule::Engine;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
 use crate::model::{self, Coverage, LayerAtPixel};
@@ -38,14 +37,6 @@ pub(crate) struct ThreadedTape<T> {
 }
 
 impl<T: Real> Backward<T> for ThreadedTape<T> {
-    fn settings(&self) -> &RenderSettings {
-        &self.settings
-    }
-
-    fn engine(&self) -> Engine {
-        Engine::Threaded
-    }
-
     fn backward(&self, grad_output: &Image<T>, progress: &dyn Progress) -> Result<Gradients<T>> {
         let k = T::c(self.settings.camera.blur_k);
         backward::run(
@@ -92,6 +83,19 @@ impl<T: Real> ThreadedTape<T> {
         self.stack.height
     }
 
+    /// `f(px, py)` for every padded pixel of `layer`, rows in parallel, folded onto the
+    /// image pixels they mirror (in padded order, so deterministic): the adjoint of
+    /// reflection padding applied to a per-padded-pixel gather.
+    fn gather_padded(&self, layer: &Planes<T>, f: impl Fn(usize, usize) -> T + Sync) -> Vec<T> {
+        let stride = layer.stride;
+        let f = &f;
+        let padded: Vec<T> = (0..layer.rows)
+            .into_par_iter()
+            .flat_map_iter(|py| (0..stride).map(move |px| f(px, py)))
+            .collect();
+        fold_padded(&layer.source, padded, self.width() * self.height())
+    }
+
     /// Unpadded index of padded index `p`, if it lies inside the image.
     #[inline(always)]
     fn inner(&self, p: isize, stride: usize, big_r: usize) -> Option<usize> {
@@ -114,7 +118,7 @@ impl<T: Real> ThreadedTape<T> {
         rg: &ReceiverGrads<T>,
         k: T,
     ) -> (Vec<T>, f64) {
-        let (w, h, big_r, stride) = (self.width(), self.height(), kernel.big_r, layer.stride);
+        let (w, h) = (self.width(), self.height());
         let rows: Vec<(Vec<T>, f64)> = (0..h)
             .into_par_iter()
             .map(|py| {
@@ -122,7 +126,7 @@ impl<T: Real> ThreadedTape<T> {
                 let row = (0..w)
                     .map(|px| {
                         let i = py * w + px;
-                        let xi = (py + big_r) * stride + px + big_r;
+                        let xi = layer.index(px, py);
                         let (d_x, e_x) = (layer.rel_disp[xi], layer.focus_weight[xi]);
                         let (de_dd, de_dk) = model::focus_weight_derivatives(k, d_x, e_x);
                         let (gc_rgb, gw) = (rg.d_colour_sum[i], rg.d_weight_sum[i]);
@@ -140,15 +144,7 @@ impl<T: Real> ThreadedTape<T> {
                             let lin = layer.rgb(yi);
                             let gc =
                                 gc_rgb[0] * lin[0] + gc_rgb[1] * lin[1] + gc_rgb[2] * lin[2] + gw;
-                            let s = model::scatter_term(
-                                kernel.step,
-                                &kernel.aperture,
-                                tap.dx,
-                                tap.dy,
-                                dist,
-                                gauge,
-                                r_y,
-                            );
+                            let s = kernel.scatter::<false>(tap, dist, gauge, r_y).0;
                             let base = gc * a_y * s / model::source_area(kernel.step, r_y);
                             let (_, do_ddx, do_de) =
                                 model::occlusion_derivatives(e_x, layer.rel_disp[yi], d_x);
@@ -158,7 +154,7 @@ impl<T: Real> ThreadedTape<T> {
                         if kernel.coverage == Coverage::SoftDisc {
                             // o(x) depends on r(x) = K |d(x)| + 1.
                             let g_r = rg.d_coverage[i]
-                                * kernel.disc_coverage(layer, xi, true).derivative_radius();
+                                * kernel.disc_coverage::<true>(layer, xi).derivative_radius();
                             g_d = g_d + g_r * k * model::scatter_radius_sign(d_x);
                             g_k = g_k + g_r * d_x.abs();
                         }
@@ -211,15 +207,7 @@ impl<T: Real> ThreadedTape<T> {
                             let (gc_rgb, gw) = (rg.d_colour_sum[x], rg.d_weight_sum[x]);
                             let gc =
                                 gc_rgb[0] * lin[0] + gc_rgb[1] * lin[1] + gc_rgb[2] * lin[2] + gw;
-                            let (s, ds_dr) = model::scatter_term_with_derivative(
-                                kernel.step,
-                                &kernel.aperture,
-                                tap.dx,
-                                tap.dy,
-                                dist,
-                                gauge,
-                                r_y,
-                            );
+                            let (s, ds_dr) = kernel.scatter::<true>(tap, dist, gauge, r_y);
                             let (o, do_ddy) = if offset == 0 {
                                 (T::one(), T::zero())
                             } else {
@@ -293,44 +281,28 @@ impl<T: Real> ThreadedTape<T> {
         let share: Vec<T> = (0..w * h)
             .into_par_iter()
             .map(|i| {
-                let xi = (i / w + big_r) * stride + i % w + big_r;
-                rg.d_coverage[i] / kernel.disc_coverage(layer, xi, false).weight
+                let xi = layer.index(i % w, i / w);
+                rg.d_coverage[i] / kernel.disc_coverage::<false>(layer, xi).weight
             })
             .collect();
-        let padded_h = layer.alpha.len() / stride;
-        let padded: Vec<T> = (0..padded_h)
-            .into_par_iter()
-            .flat_map_iter(|py| {
-                let share = &share;
-                (0..stride).map(move |px| {
-                    let yi = py * stride + px;
-                    let mut acc = T::zero();
-                    for (tap, offset, dist, gauge) in kernel.taps() {
-                        let xp = yi as isize - offset;
-                        let Some(x) = self.inner(xp, stride, big_r) else {
-                            continue;
-                        };
-                        let (r_x, _) = model::coverage_radius_px(
-                            layer.radius[xp as usize],
-                            kernel.coverage_radius,
-                            kernel.footprint_px,
-                        );
-                        let s = model::scatter_term(
-                            kernel.step,
-                            &kernel.aperture,
-                            tap.dx,
-                            tap.dy,
-                            dist,
-                            gauge,
-                            r_x,
-                        );
-                        acc = acc + share[x] * s;
-                    }
-                    acc
-                })
-            })
-            .collect();
-        fold_padded(&layer.source, padded, w * h)
+        self.gather_padded(layer, |px, py| {
+            let yi = py * stride + px;
+            let mut acc = T::zero();
+            for (tap, offset, dist, gauge) in kernel.taps() {
+                let xp = yi as isize - offset;
+                let Some(x) = self.inner(xp, stride, big_r) else {
+                    continue;
+                };
+                let (r_x, _) = model::coverage_radius_px(
+                    layer.radius[xp as usize],
+                    kernel.coverage_radius,
+                    kernel.footprint_px,
+                );
+                let s = kernel.scatter::<false>(tap, dist, gauge, r_x).0;
+                acc = acc + share[x] * s;
+            }
+            acc
+        })
     }
 
     /// Paper coverage `o(x) = mean of alpha over a box of half-size h(x)`; each padded
@@ -341,10 +313,10 @@ impl<T: Real> ThreadedTape<T> {
         kernel: &Kernel<T>,
         rg: &ReceiverGrads<T>,
     ) -> Vec<T> {
-        let (w, h, stride, big_r) = (self.width(), self.height(), layer.stride, kernel.big_r);
+        let (w, h, big_r) = (self.width(), self.height(), kernel.big_r);
         let half: Vec<usize> = (0..w * h)
             .map(|i| {
-                let xi = (i / w + big_r) * stride + i % w + big_r;
+                let xi = layer.index(i % w, i / w);
                 model::coverage_half_size_px(layer.radius[xi], big_r)
             })
             .collect();
@@ -352,35 +324,26 @@ impl<T: Real> ThreadedTape<T> {
             .map(|i| rg.d_coverage[i] / T::c(((2 * half[i] + 1) * (2 * half[i] + 1)) as f64))
             .collect();
         let h_max = half.iter().copied().max().unwrap_or(0) as isize;
-        let padded_h = layer.alpha.len() / stride;
-        let padded: Vec<T> = (0..padded_h)
-            .into_par_iter()
-            .flat_map_iter(|py| {
-                let half = &half;
-                let share = &share;
-                (0..stride).map(move |px| {
-                    let mut acc = T::zero();
-                    for dy in -h_max..=h_max {
-                        for dx in -h_max..=h_max {
-                            let (qx, qy) = (px as isize - dx, py as isize - dy);
-                            if qx < big_r as isize
-                                || qy < big_r as isize
-                                || qx >= (big_r + w) as isize
-                                || qy >= (big_r + h) as isize
-                            {
-                                continue;
-                            }
-                            let x = (qy as usize - big_r) * w + (qx as usize - big_r);
-                            let hx = half[x] as isize;
-                            if dx.abs() <= hx && dy.abs() <= hx {
-                                acc = acc + share[x];
-                            }
-                        }
+        self.gather_padded(layer, |px, py| {
+            let mut acc = T::zero();
+            for dy in -h_max..=h_max {
+                for dx in -h_max..=h_max {
+                    let (qx, qy) = (px as isize - dx, py as isize - dy);
+                    if qx < big_r as isize
+                        || qy < big_r as isize
+                        || qx >= (big_r + w) as isize
+                        || qy >= (big_r + h) as isize
+                    {
+                        continue;
                     }
-                    acc
-                })
-            })
-            .collect();
-        fold_padded(&layer.source, padded, w * h)
+                    let x = (qy as usize - big_r) * w + (qx as usize - big_r);
+                    let hx = half[x] as isize;
+                    if dx.abs() <= hx && dy.abs() <= hx {
+                        acc = acc + share[x];
+                    }
+                }
+            }
+            acc
+        })
     }
 }

@@ -47,6 +47,21 @@ impl<T: Real> Kernel<T> {
             .map(|((tap, &offset), &(dist, gauge))| (tap, offset, dist, gauge))
     }
 
+    /// The scatter term of `tap` for a source (or disc) of radius `radius_px`, with its
+    /// derivative with respect to the radius when `DERIV`.
+    #[inline(always)]
+    pub fn scatter<const DERIV: bool>(&self, tap: &Tap, dist: T, gauge: T, radius_px: T) -> (T, T) {
+        model::scatter_term_and::<T, DERIV>(
+            self.step,
+            &self.aperture,
+            tap.dx,
+            tap.dy,
+            dist,
+            gauge,
+            radius_px,
+        )
+    }
+
     /// Gathers one layer at padded receiver index `xi`: the accumulated sums and coverage.
     #[inline]
     pub fn gather(&self, layer: &Planes<T>, xi: usize) -> (Accumulator<T>, T) {
@@ -83,45 +98,27 @@ impl<T: Real> Kernel<T> {
                     layer.alpha[(xi as isize + dy * stride + dx) as usize]
                 })
             }
-            Coverage::SoftDisc => self.disc_coverage(layer, xi, false).value(),
+            Coverage::SoftDisc => self.disc_coverage::<false>(layer, xi).value(),
         }
     }
 
     /// The soft-disc coverage sums at padded receiver index `xi`, in tap order; with
-    /// `derivative`, also the sums of `dS/dr(x)` (already times `dr_c/dr(x)`).
+    /// `DERIV`, also the sums of `dS/dr(x)` (already times `dr_c/dr(x)`).
     #[inline]
-    pub fn disc_coverage(
+    pub fn disc_coverage<const DERIV: bool>(
         &self,
         layer: &Planes<T>,
         xi: usize,
-        derivative: bool,
     ) -> model::DiscCoverage<T> {
         let (r_x, dr) =
             model::coverage_radius_px(layer.radius[xi], self.coverage_radius, self.footprint_px);
         let mut disc = model::DiscCoverage::default();
         for (tap, offset, dist, gauge) in self.taps() {
             let a_y = layer.alpha[(xi as isize + offset) as usize];
-            if derivative {
-                let (s, ds) = model::scatter_term_with_derivative(
-                    self.step,
-                    &self.aperture,
-                    tap.dx,
-                    tap.dy,
-                    dist,
-                    gauge,
-                    r_x,
-                );
+            let (s, ds) = self.scatter::<DERIV>(tap, dist, gauge, r_x);
+            if DERIV {
                 disc.add_with_derivative(s, ds * dr, a_y);
             } else {
-                let s = model::scatter_term(
-                    self.step,
-                    &self.aperture,
-                    tap.dx,
-                    tap.dy,
-                    dist,
-                    gauge,
-                    r_x,
-                );
                 disc.add(s, a_y);
             }
         }

@@ -4,7 +4,7 @@
 
 use super::context::Ctx;
 use crate::engine::backward::fold_padded;
-use crate::engine::fast::runs::{lane_sum, LANES};
+use crate::engine::fast::runs::{for_each_lane, lane_sum, LANES};
 use crate::engine::fast::tiles::{backward_reach, ROW_BLOCK, TILE, TILE_ROWS};
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, ApertureEval, ScatterStep};
@@ -170,19 +170,12 @@ fn disc_tile_row<T: Real>(
                             ApertureEval::Kernel(..) => {
                                 let mut a = T::zero();
                                 for j in 0..n {
-                                    let (ddx, ddy) = ((g0 + j) as isize - big_r as isize, ddy);
-                                    let (dx, dy) = (-ddx, -ddy);
-                                    let (tr, tc) = (
-                                        (dy + big_r as isize) as usize,
-                                        (dx + big_r as isize) as usize,
-                                    );
-                                    let s = model::scatter_term(
+                                    // Receiver offset x - y = (ddx, ddy); the tap offset is y - x.
+                                    let ddx = (g0 + j) as isize - big_r as isize;
+                                    let (s, _) = tables.scatter_at::<false>(
                                         src.step,
                                         ctx.aperture,
-                                        dx,
-                                        dy,
-                                        T::c(tables.dist[tr][tc]),
-                                        tables.gauge[tr][tc],
+                                        (-ddx, -ddy),
                                         rc[i0 + j],
                                     );
                                     a = a + share[i0 + j] * s;
@@ -203,16 +196,8 @@ fn disc_tile_row<T: Real>(
 fn disc_run<T: Real>(step: ScatterStep, rc: &[T], share: &[T], gauge: &[T]) -> T {
     let n = gauge.len();
     let mut lanes = [T::zero(); LANES];
-    let full = n / LANES * LANES;
-    for base in (0..full).step_by(LANES) {
-        for l in 0..LANES {
-            let i = base + l;
-            lanes[l] = lanes[l] + share[i] * model::scatter_step_fast(step, rc[i] - gauge[i]);
-        }
-    }
-    for i in full..n {
-        lanes[i - full] =
-            lanes[i - full] + share[i] * model::scatter_step_fast(step, rc[i] - gauge[i]);
-    }
+    for_each_lane(n, |l, i| {
+        lanes[l] = lanes[l] + share[i] * model::scatter_step_fast(step, rc[i] - gauge[i]);
+    });
     lane_sum(&lanes)
 }

@@ -76,7 +76,6 @@ use crate::engine::fast::forward::render_recording;
 use crate::engine::fast::runs::{disc_sums, LaneReduction};
 use crate::engine::fast::tiles::{backward_reach, WindowTables};
 use crate::engine::planes::Planes;
-use crate::engine::schedule::Engine;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
 use crate::model::{self, ApertureEval, Coverage, DiscCoverage, LayerAtPixel, PreparedLayer};
@@ -128,14 +127,6 @@ struct State<T> {
 }
 
 impl<T: Real> Backward<T> for FastTape<T> {
-    fn settings(&self) -> &RenderSettings {
-        &self.settings
-    }
-
-    fn engine(&self) -> Engine {
-        Engine::Fast
-    }
-
     /// Back-propagates `grad_output` on the fast schedule. Deterministic for any thread
     /// count: every output element is computed by one task, in a fixed order.
     fn backward(&self, grad_output: &Image<T>, progress: &dyn Progress) -> Result<Gradients<T>> {

@@ -5,7 +5,7 @@
 //! `dL/do(x) / Z(x)` for pass C.
 
 use super::context::Ctx;
-use crate::engine::fast::runs::{lane_sum, CHUNK, LANES};
+use crate::engine::fast::runs::{for_each_lane, lane_sum, CHUNK, LANES};
 use crate::engine::fast::tiles::{
     backward_reach, source_block_max, tile_max_radius, TILE, TILE_ROWS,
 };
@@ -74,7 +74,7 @@ fn receivers_tile_row<T: Real>(
             for x in x0..x1 {
                 let i = y * w + x;
                 let o = (y - y0) * w + x;
-                let xi = (y + big_r) * stride + x + big_r;
+                let xi = src.index(x, y);
                 let (d_x, e_x) = (rcv.rel_disp[i], rcv.focus_weight[i]);
                 let (mut gd, mut gk) = (T::zero(), T::zero());
                 if e_x > T::zero() && !widths.is_empty() {
@@ -171,17 +171,10 @@ fn occlusion_run<T: Real>(src: &Planes<T>, lo: usize, gauge: &[T], gc: [T; 4], d
             t1[j] = base * ds;
             t2[j] = base * s_minus_1;
         }
-        let full = m / LANES * LANES;
-        for base in (0..full).step_by(LANES) {
-            for l in 0..LANES {
-                l1[l] = l1[l] + t1[base + l];
-                l2[l] = l2[l] + t2[base + l];
-            }
-        }
-        for j in full..m {
-            l1[j - full] = l1[j - full] + t1[j];
-            l2[j - full] = l2[j - full] + t2[j];
-        }
+        for_each_lane(m, |l, j| {
+            l1[l] = l1[l] + t1[j];
+            l2[l] = l2[l] + t2[j];
+        });
         start += m;
     }
     (lane_sum(&l1), lane_sum(&l2))
@@ -197,7 +190,6 @@ fn occlusion_run_kernel<T: Real>(
     d_x: T,
 ) -> (T, T) {
     let (src, tables) = (ctx.src, ctx.tables);
-    let t = (dy + tables.big_r as isize) as usize;
     let (mut p1, mut p2) = (T::zero(), T::zero());
     for j in start..end {
         let yi = lo + j;
@@ -206,16 +198,7 @@ fn occlusion_run_kernel<T: Real>(
             continue;
         }
         let dx = j as isize - hw as isize;
-        let g0 = (dx + tables.big_r as isize) as usize;
-        let s = model::scatter_term(
-            src.step,
-            ctx.aperture,
-            dx,
-            dy,
-            T::c(tables.dist[t][g0]),
-            tables.gauge[t][g0],
-            src.radius[yi],
-        );
+        let (s, _) = tables.scatter_at::<false>(src.step, ctx.aperture, (dx, dy), src.radius[yi]);
         let g = gc[0] * src.red[yi] + gc[1] * src.green[yi] + gc[2] * src.blue[yi] + gc[3];
         let base = g * a * s * src.inv_area[yi];
         let (ds, s_minus_1) = model::occlusion_receiver_factors_fast(src.rel_disp[yi], d_x);

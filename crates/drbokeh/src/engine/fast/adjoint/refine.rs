@@ -55,7 +55,7 @@ pub(super) fn refine_small_weights<T: Real>(
                 if s.weight >= below || !occupied[x] {
                     return *s;
                 }
-                let xi = (y + big_r) * stride + x + big_r;
+                let xi = src.index(x, y);
                 let d_x = src.rel_disp[xi];
                 // Below the cutoff the fast engine takes O = 1 (a zero focus weight).
                 let e_x = match src.focus_weight[xi] {
@@ -63,29 +63,23 @@ pub(super) fn refine_small_weights<T: Real>(
                     e => e,
                 };
                 let mut acc = model::Accumulator::<T>::default();
-                for dy in -(big_r as isize)..=big_r as isize {
-                    let t = (dy + big_r as isize) as usize;
-                    let Some(hw) = widths[t] else {
+                for (dx, dy) in tables.taps_within(widths) {
+                    let yi = (xi as isize + dy * stride as isize + dx) as usize;
+                    let a = src.alpha[yi];
+                    if a == T::zero() {
                         continue;
-                    };
-                    for dx in -(hw as isize)..=hw as isize {
-                        let yi = (xi as isize + dy * stride as isize + dx) as usize;
-                        let a = src.alpha[yi];
-                        if a == T::zero() {
-                            continue;
-                        }
-                        let g0 = (dx + big_r as isize) as usize;
-                        let c = model::masked_tap_weight(
-                            src.step,
-                            aperture,
-                            (dx, dy),
-                            T::c(tables.dist[t][g0]),
-                            tables.gauge[t][g0],
-                            (a, src.radius[yi], src.rel_disp[yi]),
-                            (e_x, d_x),
-                        );
-                        acc.add(src.rgb(yi), c);
                     }
+                    let (dist, gauge) = tables.geometry(dx, dy);
+                    let c = model::masked_tap_weight(
+                        src.step,
+                        aperture,
+                        (dx, dy),
+                        dist,
+                        gauge,
+                        (a, src.radius[yi], src.rel_disp[yi]),
+                        (e_x, d_x),
+                    );
+                    acc.add(src.rgb(yi), c);
                 }
                 let inv = T::one() / (acc.weight + eps);
                 // The soft-disc coverage has a tail as well, and dL/dC = dL/dB o / (W + eps)
@@ -99,25 +93,11 @@ pub(super) fn refine_small_weights<T: Real>(
                             footprint,
                         );
                         let mut disc = model::DiscCoverage::<T>::default();
-                        for dy in -(big_r as isize)..=big_r as isize {
-                            let t = (dy + big_r as isize) as usize;
-                            let Some(hw) = widths[t] else {
-                                continue;
-                            };
-                            for dx in -(hw as isize)..=hw as isize {
-                                let yi = (xi as isize + dy * stride as isize + dx) as usize;
-                                let g0 = (dx + big_r as isize) as usize;
-                                let sc = model::scatter_term(
-                                    src.step,
-                                    aperture,
-                                    dx,
-                                    dy,
-                                    T::c(tables.dist[t][g0]),
-                                    tables.gauge[t][g0],
-                                    r_c,
-                                );
-                                disc.add(sc, src.alpha[yi]);
-                            }
+                        for (dx, dy) in tables.taps_within(widths) {
+                            let yi = (xi as isize + dy * stride as isize + dx) as usize;
+                            let (sc, _) =
+                                tables.scatter_at::<false>(src.step, aperture, (dx, dy), r_c);
+                            disc.add(sc, src.alpha[yi]);
                         }
                         disc.value()
                     }

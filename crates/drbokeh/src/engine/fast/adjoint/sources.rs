@@ -6,7 +6,7 @@
 //! zero-alpha source needs only `sum gc S O`, its alpha gradient).
 
 use super::context::{Ctx, Receivers};
-use crate::engine::fast::runs::{lane_sum, CHUNK, LANES};
+use crate::engine::fast::runs::{centre_scatter, for_each_lane, lane_sum, CHUNK, LANES};
 use crate::engine::fast::tiles::{backward_reach, TILE, TILE_ROWS};
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, ApertureEval, ScatterStep};
@@ -248,20 +248,6 @@ fn source_row_run<T: Real>(
     }
 }
 
-/// The scatter term of the centre tap and its derivative with respect to `r`.
-#[inline(always)]
-fn centre_scatter<T: Real>(step: ScatterStep, aperture: &ApertureEval<T>, r: T) -> (T, T) {
-    match aperture {
-        ApertureEval::Gauge => {
-            let s = model::scatter_step_fast(step, r);
-            (s, model::scatter_step_derivative(step, s))
-        }
-        ApertureEval::Kernel(..) => {
-            model::scatter_term_with_derivative(step, aperture, 0, 0, T::zero(), T::zero(), r)
-        }
-    }
-}
-
 /// Pass B's run over receivers `i0 .. i0 + gauge.len()` (image indices of one row) for one
 /// source: `[sum gC S O (3), sum gc S O, sum gc O (S' - S A'/A), sum gc S dO/dd_y]` with
 /// `gc = dL/dC . Ilin(y) + dL/dW`. `OCC = false`: every receiver has `O = 1`. `FULL =
@@ -311,26 +297,8 @@ fn source_run<T: Real, const OCC: bool, const FULL: bool>(
                 }
             }
         }
-        // Lane l sums the taps i with i % LANES == l (CHUNK is a multiple of LANES); the
-        // last chunk's remainder goes to lanes 0, 1, ...
-        let full = m / LANES * LANES;
-        for base in (0..full).step_by(LANES) {
-            for l in 0..LANES {
-                let i = base + l;
-                lanes[3][l] = lanes[3][l] + ga[i];
-                if FULL {
-                    lanes[0][l] = lanes[0][l] + gr[i] * so[i];
-                    lanes[1][l] = lanes[1][l] + gg[i] * so[i];
-                    lanes[2][l] = lanes[2][l] + gb[i] * so[i];
-                    lanes[4][l] = lanes[4][l] + rad[i];
-                    if OCC {
-                        lanes[5][l] = lanes[5][l] + dyv[i];
-                    }
-                }
-            }
-        }
-        for i in full..m {
-            let l = i - full;
+        // Lane l sums the taps i with i % LANES == l (CHUNK is a multiple of LANES).
+        for_each_lane(m, |l, i| {
             lanes[3][l] = lanes[3][l] + ga[i];
             if FULL {
                 lanes[0][l] = lanes[0][l] + gr[i] * so[i];
@@ -341,7 +309,7 @@ fn source_run<T: Real, const OCC: bool, const FULL: bool>(
                     lanes[5][l] = lanes[5][l] + dyv[i];
                 }
             }
-        }
+        });
         start += m;
     }
     lanes.map(|l| lane_sum(&l))
@@ -364,17 +332,7 @@ fn source_run_kernel<T: Real>(
         let i = i0 + j;
         // Receiver offset x - y = (ddx, ddy); the tap offset is y - x.
         let (ddx, ddy) = ((g0 + j) as isize - big_r, t as isize - big_r);
-        let (dx, dy) = (-ddx, -ddy);
-        let (tr, tc) = ((dy + big_r) as usize, (dx + big_r) as usize);
-        let (s, sd) = model::scatter_term_with_derivative(
-            src.step,
-            ctx.aperture,
-            dx,
-            dy,
-            T::c(tables.dist[tr][tc]),
-            tables.gauge[tr][tc],
-            src.radius,
-        );
+        let (s, sd) = tables.scatter_at::<true>(src.step, ctx.aperture, (-ddx, -ddy), src.radius);
         let e = rcv.focus_weight[i];
         let (o, d_o) = if e > T::zero() {
             model::occlusion_fast_with_derivative(e, src.rel_disp, rcv.rel_disp[i])
