@@ -1,6 +1,6 @@
 //! The replaceable terms of the model: one enum per term, and [`ModelOptions`], one field
-//! per term. The presets ([`crate::presets`]) are named choices of these; each variant's
-//! formula lives beside its derivative in the sibling modules (docs/model.md, "Options").
+//! per term. The presets (`crate::presets`) are named choices of these; each variant's
+//! formula lives beside its derivative in the sibling modules (docs/model.md, "Presets").
 
 /// How the layer coverage `o_l(x)` is computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -24,7 +24,7 @@ pub enum CoverageRadius {
 }
 
 /// The pixel footprint added to the circle of confusion in the scatter radius
-/// `r = K |d| + footprint` (spec: "the +1 is the pixel footprint").
+/// `r = K |d| + footprint` (docs/model.md, M2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Footprint {
     /// The paper's `+1`.

@@ -10,6 +10,7 @@ use crate::stack::Layer;
 use crate::Real;
 
 /// The camera and model options in float type `T`, for evaluating per-pixel terms.
+/// Equations M1, M2, M10, M18-M20 of docs/model.md.
 #[derive(Clone, Copy, Debug)]
 pub struct PixelModel<T> {
     /// Blur strength `K`.
@@ -70,6 +71,7 @@ impl<T: Real> PixelModel<T> {
 
 /// Per-pixel terms of one layer, computed once before the gather: linear colour (after
 /// the optional highlight boost), alpha, relative disparity `d`, radius `r`, focus weight `e`.
+/// Equations M1, M2, M10, M18-M20 of docs/model.md.
 #[derive(Clone, Debug)]
 pub struct PreparedLayer<T> {
     /// Width in pixels.
@@ -89,6 +91,7 @@ pub struct PreparedLayer<T> {
 }
 
 /// Computes the per-pixel terms of a layer for a camera under model `options`.
+/// Equations M1, M2, M10, M18-M20 of docs/model.md.
 pub fn prepare_layer<T: Real>(
     layer: &Layer<T>,
     camera: &Camera,
