@@ -143,11 +143,7 @@ pub struct ExecArgs {
 impl ExecArgs {
     /// The engine to use: `auto` resolves to fast in f32 and threaded in f64.
     pub fn engine(&self) -> Result<drbokeh::Engine> {
-        Ok(match self.engine.as_str() {
-            "auto" if self.f64 => drbokeh::Engine::Threaded,
-            "auto" => drbokeh::Engine::Fast,
-            other => other.parse()?,
-        })
+        Ok(drbokeh::Engine::parse_or_auto(&self.engine, self.f64)?)
     }
 
     /// Sets up the global thread pool.
