@@ -13,15 +13,15 @@ use serde::Serialize;
 /// A method evaluated on the benchmark.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Method {
-    /// Naive gather ([`baselines::naive_gather`]) on image + disparity.
+    /// Naive gather ([`crate::eval::baselines::naive_gather`]) on image + disparity.
     Gather,
-    /// Naive scatter ([`baselines::naive_scatter`]) on image + disparity.
+    /// Naive scatter ([`crate::eval::baselines::naive_scatter`]) on image + disparity.
     Scatter,
-    /// Layered disc blur ([`baselines::layered_disc`]) on image + disparity.
+    /// Layered disc blur ([`crate::eval::baselines::layered_disc`]) on image + disparity.
     Layered,
     /// Layered disc blur on the ground-truth layer stack.
     LayeredGt,
-    /// GaussPSF ([`baselines::gauss_psf`]) on image + disparity.
+    /// GaussPSF ([`crate::eval::baselines::gauss_psf`]) on image + disparity.
     GaussPsf,
     /// The `paper` preset on a single opaque layer (image + disparity).
     PaperAif,

@@ -199,7 +199,7 @@ pub fn metric_plot_svg(report: &Report, title: &str, get: MetricAccessor) -> Str
 /// Reads one metric from a result.
 pub type MetricAccessor = fn(&MethodResult) -> f64;
 
-/// The SVG plots written by [`write_report`]: (file name, metric title, accessor).
+/// The SVG plots written by [`crate::eval::report::write_report`]: (file name, metric title, accessor).
 pub fn plot_files() -> [(&'static str, &'static str, MetricAccessor); 3] {
     [
         ("psnr_vs_blur.svg", "PSNR (dB)", |r| r.psnr),

@@ -34,7 +34,7 @@ pub struct SceneResult {
     pub focus: f64,
     /// Largest CoC radius in the scene, pixels.
     pub max_coc_px: f64,
-    /// Blur-size bucket (see [`buckets`]).
+    /// Blur-size bucket (see [`crate::eval::report::buckets`]).
     pub bucket: String,
     /// Image width, pixels.
     pub width: usize,

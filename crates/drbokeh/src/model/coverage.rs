@@ -60,9 +60,9 @@ pub fn coverage_radius_px<T: Real>(
 /// Soft-disc layer coverage (preset `physical`): alpha averaged
 /// over the receiver's own soft aperture,
 /// `o(x) = sum_y M(x-y) S(r(x), y) a(y) / sum_y M(x-y) S(r(x), y)`,
-/// with the scatter term's S, M and aperture ([`scatter_term`]) but the radius `r(x)` of
+/// with the scatter term's S, M and aperture (`scatter_term`, M5, M6) but the radius `r(x)` of
 /// the receiver. Derivatives: `do/da(y) = S(r(x), y) / Z`, `do/dr(x) = sum_y S'(a(y) - o) / Z`
-/// with `Z = sum_y M S(r(x), y)` (at least `S(r(x), 0) >= 2/3`, the centre tap).
+/// with `Z = sum_y M S(r(x), y)` (at least `S(r(x), 0)`, the centre tap).
 /// Accumulate every masked tap with [`DiscCoverage::add`] (or `add_with_derivative`).
 /// Equation M16 of docs/model.md.
 #[derive(Clone, Copy, Debug, Default)]
