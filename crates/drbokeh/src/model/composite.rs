@@ -19,6 +19,7 @@ pub struct Accumulator<T> {
 
 impl<T: Real> Accumulator<T> {
     /// Adds one tap.
+    /// Equation M14 of docs/model.md.
     #[inline(always)]
     pub fn add(&mut self, rgb_linear: [T; 3], c: T) {
         for (acc, v) in self.colour.iter_mut().zip(rgb_linear) {
@@ -28,6 +29,7 @@ impl<T: Real> Accumulator<T> {
     }
 
     /// Layer colour `B = C / (W + 1e-8)`.
+    /// Equation M14 of docs/model.md.
     #[inline(always)]
     pub fn layer_colour(&self) -> [T; 3] {
         let w = self.weight + T::c(WEIGHT_EPSILON);

@@ -79,6 +79,7 @@ pub struct DiscCoverage<T> {
 
 impl<T: Real> DiscCoverage<T> {
     /// Adds one tap: its scatter term `S(r(x), y)` and alpha `a(y)`.
+    /// Equation M16 of docs/model.md.
     #[inline(always)]
     pub fn add(&mut self, scatter: T, alpha_y: T) {
         self.alpha_sum = self.alpha_sum + scatter * alpha_y;
@@ -86,6 +87,7 @@ impl<T: Real> DiscCoverage<T> {
     }
 
     /// Adds one tap with the derivative of its scatter term with respect to `r(x)`.
+    /// Equation M16 of docs/model.md.
     #[inline(always)]
     pub fn add_with_derivative(&mut self, scatter: T, d_scatter_dr: T, alpha_y: T) {
         self.add(scatter, alpha_y);
@@ -94,12 +96,14 @@ impl<T: Real> DiscCoverage<T> {
     }
 
     /// The coverage `o(x) = sum S a / Z`.
+    /// Equation M16 of docs/model.md.
     #[inline(always)]
     pub fn value(&self) -> T {
         self.alpha_sum / self.weight
     }
 
     /// `do/dr(x) = (sum S' a - o sum S') / Z` (needs `add_with_derivative`).
+    /// Equation M16 of docs/model.md.
     #[inline(always)]
     pub fn derivative_radius(&self) -> T {
         (self.d_alpha_sum - self.value() * self.d_weight) / self.weight

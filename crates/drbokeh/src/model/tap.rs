@@ -46,6 +46,7 @@ impl<T: Real> ApertureEval<T> {
     /// dropped tail ([`SCATTER_TAIL_PX`]): the polygon lies inside the
     /// circle (its gauge is at least the distance), and a kernel reaches the corner of its
     /// square, `sqrt(2) r`, plus one texel of bilinear support.
+    /// Equations M6, M21 of docs/model.md.
     pub(crate) fn reach_px(&self, radius_px: f64) -> f64 {
         let tail = SCATTER_TAIL_PX;
         match self {
@@ -58,6 +59,7 @@ impl<T: Real> ApertureEval<T> {
         }
     }
 
+    /// Prepares an aperture for evaluation (equations M5, M6 of docs/model.md).
     pub(crate) fn new(a: &Aperture) -> Self {
         match a {
             Aperture::Kernel(k) => ApertureEval::Kernel(k.clone(), std::marker::PhantomData),

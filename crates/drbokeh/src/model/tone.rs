@@ -81,6 +81,7 @@ pub struct Tone {
 
 impl Tone {
     /// A transfer with the camera's gamma and offset.
+    /// Equations M18, M19 of docs/model.md.
     pub fn new(transfer: Transfer, gamma: f64, offset: f64) -> Self {
         Tone {
             transfer,
@@ -91,6 +92,7 @@ impl Tone {
 
     /// Display-encoded value to linear, and its derivative `dlin/dI`. For the gamma curve:
     /// [`linearize`] and `g (I + offset)^(g-1)` (0 where `I + offset <= 0`).
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn linearize_with_derivative<T: Real>(&self, encoded: T) -> (T, T) {
         match self.transfer {
@@ -110,6 +112,7 @@ impl Tone {
     }
 
     /// Display-encoded value to linear.
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn linearize<T: Real>(&self, encoded: T) -> T {
         match self.transfer {
@@ -119,6 +122,7 @@ impl Tone {
     }
 
     /// Linear to display encoding ([`encode`] or [`linear_to_srgb`]).
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn encode<T: Real>(&self, linear: T) -> T {
         match self.transfer {
@@ -128,6 +132,7 @@ impl Tone {
     }
 
     /// Derivative of [`Tone::encode`] ([`encode_derivative`] or [`linear_to_srgb_derivative`]).
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn encode_derivative<T: Real>(&self, linear: T) -> T {
         match self.transfer {
