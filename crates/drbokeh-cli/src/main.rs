@@ -101,6 +101,6 @@ fn main() {
 /// Prints the error and exits: 2 for a bad option value (a usage error, as clap reports
 /// its own), 1 for everything else (bad files, failed work).
 fn fail(e: &anyhow::Error) -> ! {
-    eprintln!("drbokeh: error: {e:#}");
+    eprintln!("drbokeh: error: {}", args::describe(e));
     std::process::exit(if values::is_usage_error(e) { 2 } else { 1 });
 }

@@ -1,27 +1,14 @@
 //! Parsers for option values and the usage-error test behind the exit codes.
 
-/// Values within this distance of [0, 1] are taken as the nearest end: a focus computed in
-/// floating point (`benchmark make` writes `(1/z_f - 1/z_far) / (1/z_near - 1/z_far)`) can
-/// land a few ulps outside, and our own outputs must be valid inputs.
-pub const UNIT_INTERVAL_SLACK: f64 = 1e-9;
-
-/// A focus disparity: a number, snapped into [0, 1] when within [`UNIT_INTERVAL_SLACK`] of
-/// it. Other values pass through, for the camera's validation to report on one line.
+/// A focus disparity: a number, snapped into [0, 1] when within
+/// [`drbokeh::scene::UNIT_INTERVAL_SLACK`] of
+/// it ([`drbokeh::scene::unit_interval`]). Other values pass through, for the camera's validation to report on one line.
 pub fn focus(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .trim()
         .parse()
         .map_err(|_| format!("expected a number in [0, 1], got '{s}'"))?;
-    Ok(unit_interval(v).unwrap_or(v))
-}
-
-/// `v` if it lies in [0, 1], snapped to the nearest end if within [`UNIT_INTERVAL_SLACK`].
-pub fn unit_interval(v: f64) -> Option<f64> {
-    if (-UNIT_INTERVAL_SLACK..=1.0 + UNIT_INTERVAL_SLACK).contains(&v) {
-        Some(v.clamp(0.0, 1.0))
-    } else {
-        None
-    }
+    Ok(drbokeh::scene::unit_interval(v).unwrap_or(v))
 }
 
 /// A finite number > 0.

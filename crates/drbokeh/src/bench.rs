@@ -2,10 +2,12 @@
 //! multi-threaded engine (and the single-threaded reference where affordable), measured in
 //! one run, with taps visited, throughput and the largest difference in linear light.
 
+use crate::camera::WindowCap;
 use crate::demo;
-use crate::engine::adjoint::render_with_tape_on;
+use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
+use crate::model;
 use crate::presets::RenderSettings;
 use crate::stack::{Layer, LayerStack};
 use crate::{Result, Window};
@@ -119,7 +121,11 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
         "demo-3L-K30",
         &|| {
             let demo_stack: LayerStack<f32> = demo::scene(640, 426);
-            let demo_window = Window::auto(30.0 * demo_stack.max_defocus(demo::DEMO_FOCUS) + 1.0);
+            let demo_window = model::automatic_window(
+                30.0,
+                demo_stack.max_defocus(demo::DEMO_FOCUS),
+                WindowCap::Clipped,
+            );
             (demo_stack, settings(demo::DEMO_FOCUS, 30.0, demo_window))
         },
         vec![Engine::Threaded, Engine::Reference],
@@ -160,7 +166,11 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
         &|| {
             (
                 uniform_blur(256, 256),
-                settings(0.5, 200.0, Window::auto_unclipped(101.0)),
+                settings(
+                    0.5,
+                    200.0,
+                    model::automatic_window(200.0, 0.5, WindowCap::Unclipped),
+                ),
             )
         },
         vec![],
@@ -191,7 +201,11 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
             &|| {
                 (
                     uniform_blur(256, 256),
-                    settings(0.5, 400.0, Window::auto_unclipped(201.0)),
+                    settings(
+                        0.5,
+                        400.0,
+                        model::automatic_window(400.0, 0.5, WindowCap::Unclipped),
+                    ),
                 )
             },
             vec![],

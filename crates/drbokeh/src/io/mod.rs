@@ -7,6 +7,7 @@
 //! work; [`temps`] removes temporaries on signals and sweeps those of killed runs.
 
 mod depth;
+mod files;
 mod npy;
 mod npz;
 mod outputs;
@@ -18,24 +19,9 @@ pub use depth::{read_disparity, DepthKind, DisparityOptions};
 pub use npz::{read_stack, write_gradients, write_stack};
 pub use outputs::{DirMode, OutputPlan};
 pub(crate) use raster::decode_as;
+pub(crate) use raster::is_linear;
 pub use raster::{
     image_dimensions, read_grey, read_matte, read_npy_image, read_rgb, write_grey, write_output,
     BitDepth, OutputFormat,
 };
 pub use staging::{write_atomic, Staging};
-
-use crate::{Error, Result};
-use std::path::Path;
-
-/// Opens a file for reading with a message naming it on failure.
-pub(crate) fn open(path: &Path) -> Result<std::fs::File> {
-    std::fs::File::open(path).map_err(|e| Error::file(path, format!("cannot open: {e}")))
-}
-
-/// The lower-cased extension of a path ("" if none).
-pub(crate) fn extension(path: &Path) -> String {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase()
-}

@@ -386,7 +386,7 @@ fn fortran_to_c<T: Copy>(data: &[T], shape: &[u64]) -> Vec<T> {
 /// Opens an NPY file and reads its header, checking the claimed data length against the
 /// file's size. Errors name the file.
 pub(crate) fn open_npy(path: &Path) -> Result<(std::io::BufReader<std::fs::File>, Header)> {
-    let file = super::open(path)?;
+    let file = super::files::open(path)?;
     let file_len = file
         .metadata()
         .map_err(|e| Error::file(path, format!("cannot read: {e}")))?

@@ -1,10 +1,10 @@
 //! NPZ layer stacks: keys `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W); float32 or
 //! float64; uint8/uint16 colour is scaled to [0, 1].
 
+use super::files::open;
 use super::npy::{self, Header, Integers};
-use super::open;
 use super::staging::Staging;
-use crate::engine::adjoint::Gradients;
+use crate::engine::Gradients;
 use crate::image::{check_dimensions, Image};
 use crate::stack::{Layer, LayerStack};
 use crate::{budget, Error, Real, Result};
@@ -310,14 +310,13 @@ impl Staging {
             err: impl Fn(ndarray_npy::WriteNpzError) -> Error,
         ) -> Result<()> {
             let n = grads.layers.len();
-            let cat =
-                |f: &dyn Fn(&crate::engine::adjoint::LayerGradients<T>) -> &Image<T>| -> Vec<E> {
-                    grads
-                        .layers
-                        .iter()
-                        .flat_map(|l| f(l).data.iter().map(|&v| conv(v)))
-                        .collect()
-                };
+            let cat = |f: &dyn Fn(&crate::engine::LayerGradients<T>) -> &Image<T>| -> Vec<E> {
+                grads
+                    .layers
+                    .iter()
+                    .flat_map(|l| f(l).data.iter().map(|&v| conv(v)))
+                    .collect()
+            };
             let mut npz = NpzWriter::new(out);
             npz.add_array(
                 "rgb",

@@ -1,10 +1,10 @@
 //! Raster images through the `image` crate: PNG (8/16-bit), JPEG, TIFF, EXR.
 //! Colour read from PNG/JPEG/TIFF is display-encoded; EXR holds linear light.
 
+use super::files::{extension, open};
 use super::npy::{self, Integers};
 use super::npz::Npz;
 use super::staging::Staging;
-use super::{extension, open};
 use crate::image::{check_dimensions, Image};
 use crate::{budget, Error, Real, Result};
 use image::{DynamicImage, ImageDecoder, ImageFormat};
