@@ -339,6 +339,7 @@ fn record<'py, T: Float>(
 /// Vector-Jacobian product of `render`: the gradient of `sum(grad_output * render)` with
 /// respect to every input, exactly what `drbokeh vjp` writes: a dict with `rgb (N,H,W,3)`,
 /// `alpha (N,H,W)`, `disparity (N,H,W)`, and 0-d arrays `blur` (d/dK) and `focus` (d/df).
+/// float64 if any array (`grad_output` included) is float64.
 #[pyfunction]
 #[pyo3(signature = (rgb, alpha, disparity, grad_output, *, focus, blur, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None, rescale_small_gradients=false))]
 #[allow(clippy::too_many_arguments)]
@@ -374,7 +375,7 @@ pub fn vjp<'py>(
         highlight,
         engine,
     };
-    match Precision::of(&[&arrays[0], &arrays[1], &arrays[2]]) {
+    match Precision::of(&[&arrays[0], &arrays[1], &arrays[2], &g]) {
         Precision::F32 => {
             let p = prepare::<f32>(py, &arrays, &c, aperture.as_ref())?;
             let shape = [p.stack.layers.len(), p.stack.height, p.stack.width];

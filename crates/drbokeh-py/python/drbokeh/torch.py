@@ -314,7 +314,7 @@ class BokehLayer(torch.nn.Module):
         )
 
     def extra_repr(self) -> str:
-        parts = [f"focus={float(self.focus):.4g}", f"blur={float(self.blur):.4g}"]
+        parts = [f"focus={float(self.focus.detach()):.4g}", f"blur={float(self.blur.detach()):.4g}"]
         parts += [f"{k}={v!r}" for k, v in self.options.items() if not hasattr(v, "shape")]
         if self.rescale_small_gradients:
             parts.append("rescale_small_gradients=True")
