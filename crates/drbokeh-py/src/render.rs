@@ -66,12 +66,40 @@ pub fn stack_args<'py>(
     ])
 }
 
-/// Renders a layer stack. Arrays: `rgb (N,H,W,3)` display-encoded colour, `alpha (N,H,W)`,
-/// `disparity (N,H,W)` (larger = nearer), layers front first. Returns the display-encoded
-/// image `(H,W,3)`, float64 if any input is float64 (then `engine="auto"` is the exact
-/// threaded engine, as `--f64`), float32 otherwise.
+/// Renders a layer stack, as `drbokeh render --layers`.
+///
+/// Args:
+///     rgb: display-encoded colour (N, H, W, 3), layers front first.
+///     alpha: coverage in [0, 1], (N, H, W).
+///     disparity: normalised disparity, larger = nearer, (N, H, W).
+///     focus: the in-focus disparity, in [0, 1].
+///     blur: blur strength K, the blur radius in pixels per unit of relative disparity.
+///     preset: "physical" (measured closer to a real lens) or "paper" (the published
+///         Dr.Bokeh model, exactly).
+///     aperture: "circle", "hexagon", "polygon:N[:DEG]" (and the other shape names of
+///         the command line), "kernel:PATH" (a grey image file), or a grey (h, w) array.
+///     window: odd gather window L = 2R + 1; None: just holds the largest blur (at most 71
+///         except for the fast engine; a clipped blur issues a DrBokehWarning).
+///     gamma, offset: the display transfer, linear = (encoded + offset) ** gamma.
+///     highlight: boost bright, defocused highlights.
+///     engine: "auto" (fast in float32, the exact threaded engine in float64, as
+///         --f64), "fast", "threaded" or "reference".
+///     threads: worker threads (default: all cores); the output never depends on it.
+///
+/// Arrays may be float32 or float64, contiguous or not; each is copied once.
+///
+/// Returns:
+///     The display-encoded image (H, W, 3): float64 if any input is float64, else float32.
+///
+/// Raises:
+///     ValueError: bad shapes, dtypes, values (NaN, alpha outside [0, 1], negative colour)
+///         or parameters, with the command line's messages.
+///     OSError: an aperture kernel file that cannot be read.
 #[pyfunction]
 #[pyo3(signature = (rgb, alpha, disparity, *, focus, blur, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None))]
+#[pyo3(
+    text_signature = "(rgb, alpha, disparity, *, focus, blur, preset='physical', aperture='circle', window=None, gamma=2.2, offset=0.0, highlight=False, engine='auto', threads=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn render<'py>(
     py: Python<'py>,
@@ -257,6 +285,9 @@ fn gradients_to_py<'py, T: Float>(
 /// the exact gradient's largest value), the exact threaded adjoint in float64.
 #[pyfunction]
 #[pyo3(signature = (rgb, alpha, disparity, *, focus, blur, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None))]
+#[pyo3(
+    text_signature = "(rgb, alpha, disparity, *, focus, blur, preset='physical', aperture='circle', window=None, gamma=2.2, offset=0.0, highlight=False, engine='auto', threads=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn render_with_tape<'py>(
     py: Python<'py>,
@@ -339,9 +370,15 @@ fn record<'py, T: Float>(
 /// Vector-Jacobian product of `render`: the gradient of `sum(grad_output * render)` with
 /// respect to every input, exactly what `drbokeh vjp` writes: a dict with `rgb (N,H,W,3)`,
 /// `alpha (N,H,W)`, `disparity (N,H,W)`, and 0-d arrays `blur` (d/dK) and `focus` (d/df).
-/// float64 if any array (`grad_output` included) is float64.
+/// float64 if any array (`grad_output` included) is float64. Options as `render`;
+/// `rescale_small_gradients` applies the published kernel's training heuristic (values
+/// of magnitude in [1e-6, 1e-2) raised to 1e-2), after which it is no longer the exact
+/// gradient.
 #[pyfunction]
 #[pyo3(signature = (rgb, alpha, disparity, grad_output, *, focus, blur, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None, rescale_small_gradients=false))]
+#[pyo3(
+    text_signature = "(rgb, alpha, disparity, grad_output, *, focus, blur, preset='physical', aperture='circle', window=None, gamma=2.2, offset=0.0, highlight=False, engine='auto', threads=None, rescale_small_gradients=False)"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn vjp<'py>(
     py: Python<'py>,

@@ -13,6 +13,9 @@ use drbokeh::Image;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+/// Colour, disparity and the optional matte of a photo.
+type PhotoImages<T> = (Image<T>, Image<T>, Option<Image<T>>);
+
 /// The photo arguments, converted: colour (display-encoded; a linear one is encoded with
 /// the render's transfer, as the CLI does for EXR), disparity and the optional matte, all
 /// of one size.
@@ -21,7 +24,7 @@ fn photo<T: Float>(
     disparity: &ArrayArg,
     matte: Option<&ArrayArg>,
     linear: Option<&drbokeh::RenderSettings>,
-) -> PyResult<(Image<T>, Image<T>, Option<Image<T>>)> {
+) -> PyResult<PhotoImages<T>> {
     let mut rgb = image.image::<T>(3)?;
     if let Some(settings) = linear {
         let tone = settings.tone();
@@ -49,9 +52,12 @@ fn photo<T: Float>(
 /// opaque layer; otherwise up to `max_layers` depth layers cut for this focus and blur.
 /// `focus`: a disparity; `focus_at=(x, y)`: the disparity seen at that pixel; neither: the
 /// centre pixel's. Notes (a fallback to one layer, a clipped window) are issued as
-/// `DrBokehWarning`s.
+/// `DrBokehWarning`s. Other options as `render`.
 #[pyfunction]
 #[pyo3(signature = (image, disparity, *, focus=None, focus_at=None, blur=30.0, alpha=None, single_layer=false, max_layers=None, linear=false, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None))]
+#[pyo3(
+    text_signature = "(image, disparity, *, focus=None, focus_at=None, blur=30.0, alpha=None, single_layer=False, max_layers=None, linear=False, preset='physical', aperture='circle', window=None, gamma=2.2, offset=0.0, highlight=False, engine='auto', threads=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn render_image<'py>(
     py: Python<'py>,

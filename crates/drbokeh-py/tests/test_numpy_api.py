@@ -111,7 +111,7 @@ def test_vjp_is_the_tape_backward():
 
 
 def test_the_gil_is_released_while_rendering():
-    s = drbokeh.demo(400, 300)
+    s = drbokeh.demo(160, 120)
     count = [0]
     stop = threading.Event()
 
@@ -122,19 +122,22 @@ def test_the_gil_is_released_while_rendering():
     t = threading.Thread(target=spin)
     t.start()
     try:
-        time.sleep(0.05)
-        before = count[0]
-        start = time.perf_counter()
+        # The spinner's rate while the main thread sleeps (the GIL free).
+        c0, t0 = count[0], time.perf_counter()
+        time.sleep(0.2)
+        rate = (count[0] - c0) / (time.perf_counter() - t0)
+        c0, t0 = count[0], time.perf_counter()
         drbokeh.render(s["rgb"], s["alpha"], s["disparity"], focus=s["focus"], blur=30,
-                       engine="threaded", window=41, threads=1)
-        elapsed = time.perf_counter() - start
-        during = count[0] - before
+                       engine="threaded", window=21, threads=1)
+        elapsed = time.perf_counter() - t0
+        during = count[0] - c0
     finally:
         stop.set()
         t.join()
-    assert elapsed > 0.05, "the render was too quick to tell"
-    # A thread blocked on the GIL would not have counted at all during the call.
-    assert during > 1000, (during, elapsed)
+    assert elapsed > 0.2, f"the render took {elapsed:.3f} s: too quick to tell"
+    # Holding the GIL, the call would leave the spinner at most a switch interval (5 ms)
+    # on either side: a few per cent of the render's time, not a tenth.
+    assert during > 0.1 * rate * elapsed, (during, rate, elapsed)
 
 
 def test_a_clipped_automatic_window_warns():
