@@ -9,7 +9,8 @@ released, and handing the image to NumPy. The library's time is measured by
 `drbokeh._native.time_library_render`, which converts the stack once and then times only
 `drbokeh::render(&stack, &settings, engine, &NoProgress)` (what a Rust caller pays). Each
 round runs one of each, alternating which goes first; the report gives the medians and
-the ratio of medians.
+the ratio of medians; then the Python call's own work is timed alone (the arguments
+converted and the settings resolved, no render).
 """
 
 from __future__ import annotations
@@ -77,6 +78,16 @@ def main() -> None:
     print(f"overhead: median ratio {mp / mr:.4f} ({(mp / mr - 1) * 100:+.2f} %), "
           f"min ratio {min(py) / min(rs):.4f} ({(min(py) / min(rs) - 1) * 100:+.2f} %)")
     print(f"median paired difference {diff * 1e3:+.1f} ms ({diff / mr * 100:+.2f} % of the Rust median)")
+    # The Python call's own work, without the render: the same argument checks, copies,
+    # validation and settings as drbokeh.render (time_library_render with no repeats).
+    conv = []
+    for _ in range(a.rounds):
+        t0 = time.perf_counter()
+        _native.time_library_render(rgb, alpha, disparity, **kw, repeats=0)
+        conv.append(time.perf_counter() - t0)
+    mc = statistics.median(conv)
+    print(f"arguments alone (checks, one copy per array, validation, settings): median "
+          f"{mc * 1e3:.1f} ms, min {min(conv) * 1e3:.1f} ms ({mc / mr * 100:.2f} % of the Rust median)")
 
 
 if __name__ == "__main__":
