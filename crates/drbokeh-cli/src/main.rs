@@ -70,7 +70,7 @@ fn main() {
         Command::Gallery(a) => eval_cmd::run_gallery(&a),
     };
     if let Err(e) = result {
-        eprintln!("drbokeh: error: {e:#}");
+        eprintln!("drbokeh: error: {}", args::describe(&e));
         std::process::exit(1);
     }
 }

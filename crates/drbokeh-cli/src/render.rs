@@ -1,6 +1,6 @@
 //! `drbokeh render`.
 
-use crate::args::{load_scene_for_render, settings_for, CameraArgs, ExecArgs, SceneArgs};
+use crate::args::{resolve, CameraArgs, ExecArgs, SceneArgs};
 use crate::progress::Bar;
 use anyhow::Result;
 use clap::Args;
@@ -58,10 +58,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
 
 fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let engine: Engine = a.exec.engine()?;
-    let (stack, notes) = load_scene_for_render::<T>(&a.scene, &a.camera, engine)?;
-    let (settings, note) = settings_for(&a.camera, &a.scene, &stack, engine)?;
+    let drbokeh::scene::Scene {
+        stack,
+        settings,
+        notes,
+    } = resolve::<T>(&a.scene, &a.camera, engine)?;
     if !a.exec.quiet {
-        for n in notes.iter().chain(&note) {
+        for n in &notes {
             eprintln!("drbokeh: note: {n}");
         }
     }

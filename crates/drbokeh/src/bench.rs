@@ -2,10 +2,12 @@
 //! multi-threaded engine (and the single-threaded reference where affordable), measured in
 //! one run, with taps visited, throughput and the largest difference in linear light.
 
+use crate::camera::WindowCap;
 use crate::demo;
-use crate::engine::adjoint::render_with_tape_on;
+use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
+use crate::model;
 use crate::presets::RenderSettings;
 use crate::stack::{Layer, LayerStack};
 use crate::{Result, Window};
@@ -106,7 +108,11 @@ pub fn workloads(quick: bool) -> Vec<Workload> {
         })
     };
     let demo_stack: LayerStack<f32> = demo::scene(640, 426);
-    let demo_window = Window::auto(30.0 * demo_stack.max_defocus(demo::DEMO_FOCUS) + 1.0);
+    let demo_window = model::automatic_window(
+        30.0,
+        demo_stack.max_defocus(demo::DEMO_FOCUS),
+        WindowCap::Clipped,
+    );
     add(
         "demo-3L-K30",
         demo_stack,
@@ -148,7 +154,11 @@ pub fn workloads(quick: bool) -> Vec<Workload> {
     add(
         "0.07MP-1L-radius100",
         uniform_blur(256, 256),
-        settings(0.5, 200.0, Window::auto_unclipped(101.0)),
+        settings(
+            0.5,
+            200.0,
+            model::automatic_window(200.0, 0.5, WindowCap::Unclipped),
+        ),
         vec![],
     );
     if !quick {
@@ -179,7 +189,11 @@ pub fn workloads(quick: bool) -> Vec<Workload> {
         add(
             "0.07MP-1L-radius200",
             uniform_blur(256, 256),
-            settings(0.5, 400.0, Window::auto_unclipped(201.0)),
+            settings(
+                0.5,
+                400.0,
+                model::automatic_window(400.0, 0.5, WindowCap::Unclipped),
+            ),
             vec![],
         );
     }

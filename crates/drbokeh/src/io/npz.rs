@@ -1,8 +1,8 @@
 //! NPZ layer stacks: keys `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W); float32 or
 //! float64; uint8/uint16 colour is scaled to [0, 1].
 
-use super::{open, write_atomic};
-use crate::engine::adjoint::Gradients;
+use super::files::{open, write_atomic};
+use crate::engine::Gradients;
 use crate::image::{check_dimensions, Image};
 use crate::stack::{Layer, LayerStack};
 use crate::{Error, Real, Result};
@@ -146,7 +146,7 @@ pub fn write_gradients<T: Real>(
         err: impl Fn(ndarray_npy::WriteNpzError) -> Error,
     ) -> Result<()> {
         let n = grads.layers.len();
-        let cat = |f: &dyn Fn(&crate::engine::adjoint::LayerGradients<T>) -> &Image<T>| -> Vec<E> {
+        let cat = |f: &dyn Fn(&crate::engine::LayerGradients<T>) -> &Image<T>| -> Vec<E> {
             grads
                 .layers
                 .iter()
