@@ -1,6 +1,6 @@
-//! Library errors as Python exceptions, with the CLI's messages: a file that cannot be read,
-//! decoded or written is an `OSError`, every other input or parameter problem a
-//! `ValueError`.
+//! Library errors as Python exceptions, with the library's messages (the CLI prints the same
+//! ones, spelling parameter names as flags): a file that cannot be read, decoded or written
+//! is an `OSError`, every other input or parameter problem a `ValueError`.
 
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::PyErr;
@@ -8,7 +8,9 @@ use pyo3::PyErr;
 /// Converts a library error into the matching Python exception.
 pub fn to_py(e: drbokeh::Error) -> PyErr {
     match e {
-        drbokeh::Error::File { .. } => PyOSError::new_err(e.to_string()),
+        drbokeh::Error::File { .. } | drbokeh::Error::Io { .. } => {
+            PyOSError::new_err(e.to_string())
+        }
         other => PyValueError::new_err(other.to_string()),
     }
 }

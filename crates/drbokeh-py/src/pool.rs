@@ -24,7 +24,7 @@ impl Workers {
         };
         if n == 0 || n > MAX_THREADS {
             return Err(value_error(format!(
-                "invalid parameter --threads: must be between 1 and {MAX_THREADS}, got {n}"
+                "invalid parameter threads: must be between 1 and {MAX_THREADS}, got {n}"
             )));
         }
         let mut pools = POOLS.lock().unwrap_or_else(|p| p.into_inner());

@@ -4,8 +4,9 @@ use crate::convert::{
     image_to_py, planes_to_py, scalar_to_py, shape_str, stack_from, ArrayArg, Float, Precision,
 };
 use crate::errors::{value_error, OrRaise};
-use crate::policy::{aperture_from, settings_for, CameraOptions};
+use crate::policy::{resolve, ViewArgs};
 use crate::pool::Workers;
+use drbokeh::scene::Source;
 use drbokeh::{Engine, Gradients, LayerStack, NoProgress, RenderSettings};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -31,24 +32,22 @@ pub struct Prepared<T> {
     pub engine: Engine,
 }
 
-/// Converts the stack and resolves the settings (warning about a clipped window).
+/// Converts the stack and resolves the settings as the CLI does (`drbokeh::scene::resolve`,
+/// warning about a clipped window).
 pub fn prepare<T: Float>(
     py: Python<'_>,
     arrays: &[ArrayArg<'_>; 3],
-    c: &CameraOptions,
+    c: &ViewArgs,
     aperture: Option<&Bound<'_, PyAny>>,
+    workers: &Workers,
 ) -> PyResult<Prepared<T>> {
     let engine = c.engine(T::PRECISION)?;
-    let preset = c.preset()?;
-    let aperture = aperture_from(aperture)?;
+    let view = c.view(aperture)?;
     let stack = stack_from::<T>(&arrays[0], &arrays[1], &arrays[2])?;
-    let (settings, note) = settings_for(c, &stack, engine, aperture, preset).or_raise()?;
-    if let Some(n) = note {
-        warn(py, &n)?;
-    }
+    let scene = resolve(py, Source::Stack(stack), &view, engine, workers)?;
     Ok(Prepared {
-        stack,
-        settings,
+        stack: scene.stack,
+        settings: scene.settings,
         engine,
     })
 }
@@ -93,7 +92,8 @@ pub fn stack_args<'py>(
 ///
 /// Raises:
 ///     ValueError: bad shapes, dtypes, values (NaN, alpha outside [0, 1], negative colour)
-///         or parameters, with the command line's messages.
+///         or parameters, with the library's messages (parameters named as the keyword
+///         arguments are).
 ///     OSError: an aperture kernel file that cannot be read.
 #[pyfunction]
 #[pyo3(signature = (rgb, alpha, disparity, *, focus, blur, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None))]
@@ -119,7 +119,7 @@ pub fn render<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let workers = Workers::new(threads)?;
     let arrays = stack_args(rgb, alpha, disparity)?;
-    let c = CameraOptions {
+    let c = ViewArgs {
         focus: Some(focus),
         focus_at: None,
         blur,
@@ -133,12 +133,12 @@ pub fn render<'py>(
     match Precision::of(&[&arrays[0], &arrays[1], &arrays[2]]) {
         Precision::F32 => render_prepared(
             py,
-            prepare::<f32>(py, &arrays, &c, aperture.as_ref())?,
+            prepare::<f32>(py, &arrays, &c, aperture.as_ref(), &workers)?,
             &workers,
         ),
         Precision::F64 => render_prepared(
             py,
-            prepare::<f64>(py, &arrays, &c, aperture.as_ref())?,
+            prepare::<f64>(py, &arrays, &c, aperture.as_ref(), &workers)?,
             &workers,
         ),
     }
@@ -307,7 +307,7 @@ pub fn render_with_tape<'py>(
 ) -> PyResult<(Bound<'py, PyAny>, Tape)> {
     let workers = Workers::new(threads)?;
     let arrays = stack_args(rgb, alpha, disparity)?;
-    let c = CameraOptions {
+    let c = ViewArgs {
         focus: Some(focus),
         focus_at: None,
         blur,
@@ -322,7 +322,7 @@ pub fn render_with_tape<'py>(
         Precision::F32 => {
             let (img, t, shape) = record(
                 py,
-                prepare::<f32>(py, &arrays, &c, aperture.as_ref())?,
+                prepare::<f32>(py, &arrays, &c, aperture.as_ref(), &workers)?,
                 &workers,
             )?;
             Ok((
@@ -336,7 +336,7 @@ pub fn render_with_tape<'py>(
         Precision::F64 => {
             let (img, t, shape) = record(
                 py,
-                prepare::<f64>(py, &arrays, &c, aperture.as_ref())?,
+                prepare::<f64>(py, &arrays, &c, aperture.as_ref(), &workers)?,
                 &workers,
             )?;
             Ok((
@@ -401,7 +401,7 @@ pub fn vjp<'py>(
     let workers = Workers::new(threads)?;
     let arrays = stack_args(rgb, alpha, disparity)?;
     let g = ArrayArg::new("grad_output", grad_output)?;
-    let c = CameraOptions {
+    let c = ViewArgs {
         focus: Some(focus),
         focus_at: None,
         blur,
@@ -414,14 +414,14 @@ pub fn vjp<'py>(
     };
     match Precision::of(&[&arrays[0], &arrays[1], &arrays[2], &g]) {
         Precision::F32 => {
-            let p = prepare::<f32>(py, &arrays, &c, aperture.as_ref())?;
+            let p = prepare::<f32>(py, &arrays, &c, aperture.as_ref(), &workers)?;
             let shape = [p.stack.layers.len(), p.stack.height, p.stack.width];
             check_grad_shape(&g, shape)?;
             let (_, tape, shape) = record(py, p, &workers)?;
             backward_typed(py, &tape, &g, shape, rescale_small_gradients, &workers)
         }
         Precision::F64 => {
-            let p = prepare::<f64>(py, &arrays, &c, aperture.as_ref())?;
+            let p = prepare::<f64>(py, &arrays, &c, aperture.as_ref(), &workers)?;
             let shape = [p.stack.layers.len(), p.stack.height, p.stack.width];
             check_grad_shape(&g, shape)?;
             let (_, tape, shape) = record(py, p, &workers)?;
@@ -483,7 +483,7 @@ pub fn time_library_render(
     }
     let workers = Workers::new(threads)?;
     let arrays = stack_args(rgb, alpha, disparity)?;
-    let c = CameraOptions {
+    let c = ViewArgs {
         focus: Some(focus),
         focus_at: None,
         blur,
@@ -497,13 +497,13 @@ pub fn time_library_render(
     match Precision::of(&[&arrays[0], &arrays[1], &arrays[2]]) {
         Precision::F32 => timed(
             py,
-            prepare::<f32>(py, &arrays, &c, None)?,
+            prepare::<f32>(py, &arrays, &c, None, &workers)?,
             &workers,
             repeats,
         ),
         Precision::F64 => timed(
             py,
-            prepare::<f64>(py, &arrays, &c, None)?,
+            prepare::<f64>(py, &arrays, &c, None, &workers)?,
             &workers,
             repeats,
         ),

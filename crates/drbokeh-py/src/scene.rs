@@ -3,12 +3,12 @@
 
 use crate::convert::{stack_to_py, ArrayArg, Float, Precision};
 use crate::errors::{value_error, OrRaise};
-use crate::policy::{
-    aperture_from, check_same_size, settings_for, stack_for_image, CameraOptions, ImageScene,
-};
+use crate::policy::{check_same_size, resolve, ViewArgs};
 use crate::pool::Workers;
-use crate::render::{render_prepared, warn, Prepared};
+use crate::render::{render_prepared, Prepared};
 use drbokeh::layering::{self, LayeringOptions};
+use drbokeh::model::Tone;
+use drbokeh::scene::{self, Layering, Photo, Source};
 use drbokeh::Image;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -17,20 +17,17 @@ use pyo3::types::PyDict;
 type PhotoImages<T> = (Image<T>, Image<T>, Option<Image<T>>);
 
 /// The photo arguments, converted: colour (display-encoded; a linear one is encoded with
-/// the render's transfer, as the CLI does for EXR), disparity and the optional matte, all
-/// of one size.
+/// `linear`, the render's transfer, as the CLI does for EXR: [`scene::encode_linear`]),
+/// disparity and the optional matte, all of one size.
 fn photo<T: Float>(
     image: &ArrayArg,
     disparity: &ArrayArg,
     matte: Option<&ArrayArg>,
-    linear: Option<&drbokeh::RenderSettings>,
+    linear: Option<&Tone>,
 ) -> PyResult<PhotoImages<T>> {
     let mut rgb = image.image::<T>(3)?;
-    if let Some(settings) = linear {
-        let tone = settings.tone();
-        for v in rgb.data.iter_mut() {
-            *v = T::of_f64(tone.encode(v.f64()).max(0.0));
-        }
+    if let Some(tone) = linear {
+        scene::encode_linear(&mut rgb, tone);
     }
     let disp = disparity.image::<T>(1)?;
     check_same_size(image.name, &rgb, disparity.name, &disp)?;
@@ -101,7 +98,7 @@ pub fn render_image<'py>(
         .transpose()?;
     let mut all = vec![&image, &disparity];
     all.extend(matte.as_ref());
-    let c = CameraOptions {
+    let c = ViewArgs {
         focus,
         focus_at,
         blur,
@@ -156,39 +153,31 @@ fn prepare_image<T: Float>(
     single_layer: bool,
     max_layers: Option<usize>,
     linear: bool,
-    c: &CameraOptions,
+    c: &ViewArgs,
     aperture: Option<&Bound<'_, PyAny>>,
     workers: &Workers,
 ) -> PyResult<Prepared<T>> {
     let engine = c.engine(T::PRECISION)?;
-    let preset = c.preset()?;
-    let tone = if linear {
-        Some(c.tone_settings()?)
+    let view = c.view(aperture)?;
+    let tone = linear.then(|| view.tone());
+    let (rgb_encoded, disparity, matte) = photo::<T>(image, disparity, matte, tone.as_ref())?;
+    let layering = if single_layer {
+        Layering::SingleLayer
     } else {
-        None
+        Layering::Decompose {
+            max_layers: max_layers.unwrap_or(layering::DEFAULT_MAX_LAYERS),
+        }
     };
-    let (rgb, disp, matte) = photo::<T>(image, disparity, matte, tone.as_ref())?;
-    let scene = ImageScene {
-        rgb,
-        disparity: disp,
+    let source = Source::Photo(Photo {
+        rgb_encoded,
+        disparity,
         matte,
-        single_layer,
-        max_layers,
-    };
-    let (stack, notes) = py
-        .detach(|| workers.run(|| stack_for_image(scene, c, engine, preset)))
-        .or_raise()?;
-    for n in &notes {
-        warn(py, n)?;
-    }
-    let aperture = aperture_from(aperture)?;
-    let (settings, note) = settings_for(c, &stack, engine, aperture, preset).or_raise()?;
-    if let Some(n) = note {
-        warn(py, &n)?;
-    }
+        layering,
+    });
+    let scene = resolve(py, source, &view, engine, workers)?;
     Ok(Prepared {
-        stack,
-        settings,
+        stack: scene.stack,
+        settings: scene.settings,
         engine,
     })
 }

@@ -169,7 +169,7 @@ def test_bad_tensors_raise():
         dt.render(rgb, alpha, bad, focus, blur)
     with pytest.raises(ValueError, match="focus has shape"):
         dt.render(rgb, alpha, disp, torch.tensor([0.5, 0.5]), blur)
-    with pytest.raises(ValueError, match="--focus"):
+    with pytest.raises(ValueError, match="invalid parameter focus:"):
         dt.render(rgb, alpha, disp, 1.5, blur)
     with pytest.raises(ValueError, match=r"layer 0 alpha: value .* outside \[0, 1\]"):
         dt.render(rgb, alpha * 2, disp.requires_grad_(), focus, blur)

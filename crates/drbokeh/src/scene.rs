@@ -376,11 +376,18 @@ pub fn read_photo<T: Real>(files: &PhotoFiles, tone: &Tone) -> Result<Photo<T>> 
 pub fn read_display_image<T: Real>(path: &Path, tone: &Tone) -> Result<Image<T>> {
     let mut rgb: Image<T> = io::read_rgb(path)?;
     if io::is_linear(path) {
-        for v in rgb.data.iter_mut() {
-            *v = T::c(tone.encode(v.f64()).max(0.0));
-        }
+        encode_linear(&mut rgb, tone);
     }
     Ok(rgb)
+}
+
+/// Display-encodes linear colour in place with `tone` (the transfer the renderer will
+/// undo), negative values clipped to 0: how linear colour (an EXR file, a linear array
+/// given to the Python module) enters a render.
+pub fn encode_linear<T: Real>(rgb: &mut Image<T>, tone: &Tone) {
+    for v in rgb.data.iter_mut() {
+        *v = T::c(tone.encode(v.f64()).max(0.0));
+    }
 }
 
 /// Fails unless two images (read from the named files) have the same size; the message

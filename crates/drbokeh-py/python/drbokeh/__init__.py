@@ -16,7 +16,8 @@ threaded engine, as ``drbokeh render --f64``), float32 otherwise.
   (imports PyTorch when first used; ``import drbokeh`` alone does not need it).
 
 Errors raise ``ValueError`` (bad arrays and parameters) or ``OSError`` (files), with the
-command line's messages. The GIL is released while rendering; ``threads=N`` runs the work
+messages the command line prints, parameters named as the keyword arguments are
+(``invalid parameter focus: ...`` where the command line says ``--focus``). The GIL is released while rendering; ``threads=N`` runs the work
 on a pool of N threads (the output never depends on it).
 """
 

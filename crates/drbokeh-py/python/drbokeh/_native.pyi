@@ -88,7 +88,8 @@ def render(
 
     Raises:
         ValueError: bad shapes, dtypes, values (NaN, alpha outside [0, 1], negative colour)
-            or parameters, with the command line's messages.
+            or parameters, with the library's messages (parameters named as the keyword
+            arguments are).
         OSError: an aperture kernel file that cannot be read.
     """
 

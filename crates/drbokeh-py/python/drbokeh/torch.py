@@ -195,7 +195,8 @@ def render(
 
     Raises:
         ValueError: bad shapes, dtypes, values (NaN, alpha outside [0, 1], focus outside
-            [0, 1], ...) or options, with the command line's messages.
+            [0, 1], ...) or options, with the library's messages (parameters named as
+            the keyword arguments are).
         NotImplementedError: tensors not on the CPU (drbokeh has no GPU backend).
     """
     rgb = _tensor("rgb", rgb)
