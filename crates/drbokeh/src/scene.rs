@@ -416,9 +416,7 @@ pub fn read_photo<T: Real>(files: &PhotoFiles, tone: &Tone) -> Result<Photo<T>> 
 pub fn read_display_image<T: Real>(path: &Path, tone: &Tone) -> Result<Image<T>> {
     let mut rgb: Image<T> = io::read_rgb(path)?;
     if io::is_linear(path) {
-        for v in rgb.data.iter_mut() {
-            *v = T::c(tone.encode(v.f64()).max(0.0));
-        }
+        encode_linear(&mut rgb, tone);
     }
     Ok(rgb)
 }
@@ -435,6 +433,15 @@ pub fn unit_interval(v: f64) -> Option<f64> {
         Some(v.clamp(0.0, 1.0))
     } else {
         None
+    }
+}
+
+/// Display-encodes linear colour in place with `tone` (the transfer the renderer will
+/// undo), negative values clipped to 0: how linear colour (an EXR file, a linear array
+/// given to the Python module) enters a render.
+pub fn encode_linear<T: Real>(rgb: &mut Image<T>, tone: &Tone) {
+    for v in rgb.data.iter_mut() {
+        *v = T::c(tone.encode(v.f64()).max(0.0));
     }
 }
 
