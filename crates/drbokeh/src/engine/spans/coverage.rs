@@ -8,7 +8,7 @@
 //!   as 1, relative error at most `2e-5`, see [`super::geometry::Rings::of`]) and the ring
 //!   tap by tap in chunks of [`LANES`]. O(r) per receiver.
 
-use super::geometry::{disc_row, ring_step, GaugeTable, Rings, Shape, LANES, MARGIN};
+use super::geometry::{disc_row, ring_steps, GaugeTable, Rings, Shape, LANES, MARGIN};
 use crate::engine::fast::forward::AlphaSat;
 use crate::engine::planes::Planes;
 use crate::model::{self, CoverageRadius, ScatterStep};
@@ -176,13 +176,12 @@ impl<'a, T: Real> DiscGather<'a, T> {
             }
             let alpha = &self.alpha_ext[row * ext..(row + 1) * ext];
             let mut chunk = |dx0: isize| {
-                let g = self.table.chunk(dy, dx0);
+                let s = ring_steps::<T, SHARP>(self.table, r_c, dy, dx0);
                 let start = (centre + dx0 + MARGIN as isize) as usize;
                 let a: &[T; LANES] = alpha[start..start + LANES].try_into().expect("LANES");
                 for l in 0..LANES {
-                    let s = ring_step::<T, SHARP>(r_c, g[l]);
-                    lane_a[l] = lane_a[l] + s * a[l];
-                    lane_w[l] = lane_w[l] + s;
+                    lane_a[l] = lane_a[l] + s[l] * a[l];
+                    lane_w[l] = lane_w[l] + s[l];
                 }
                 *work += LANES as u64;
             };

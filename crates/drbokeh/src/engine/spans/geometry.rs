@@ -20,10 +20,14 @@ pub const INTERIOR_DEFECT: f64 = 1e-5;
 /// Lanes of a ring chunk: receivers evaluated together (one AVX2 register of f32).
 pub const LANES: usize = 8;
 
-/// Columns of margin on each side of the gauge tables and of the row accumulators: a ring
-/// chunk is extended outwards to [`LANES`] taps, so it reaches at most `LANES - 1`
-/// columns beyond the window.
+/// Columns of margin on each side of the row accumulators: a ring chunk is extended
+/// outwards to [`LANES`] taps, so it reaches at most `LANES - 1` columns beyond its run.
 pub const MARGIN: usize = LANES;
+
+/// Columns of margin on each side of the gauge tables: a circle's ring profile is
+/// evaluated in whole chunks from the run's inner end to `LANES - 1` columns beyond its
+/// outer end, so up to `2 LANES - 2` columns beyond the window.
+pub const TABLE_MARGIN: usize = 2 * LANES;
 
 /// Ring chunks are extended outwards (away from the interior), so they evaluate some taps
 /// beyond `r + u_out`; their argument `r - g` is clamped at this value, where the step is
@@ -144,7 +148,7 @@ impl Shape {
                 if q < 0.0 {
                     return None;
                 }
-                let h = q.sqrt().floor() as isize;
+                let h = floor_sqrt(q, q.sqrt() as isize);
                 Some((-h, h))
             }
             Shape::Polygon { normals, apothem } => {
@@ -169,39 +173,58 @@ impl Shape {
     }
 }
 
-/// The gauge of every window offset, padded by [`MARGIN`] columns on each side, with the
-/// window mask `M` folded in: entries outside the window (and in the margins) hold
-/// [`GaugeTable::MASKED`]. Row `t` is the vertical offset `t - R`, column `m` the
-/// horizontal offset `m - R - MARGIN`.
+/// The largest integer `h` with `h^2 <= q` (`q >= 0`), found from a guess (exact: the
+/// circle's row half-width, [`Shape::interval`]; a neighbouring source's is usually right).
+#[inline(always)]
+pub fn floor_sqrt(q: f64, guess: isize) -> isize {
+    let mut h = guess.max(0);
+    while (h * h) as f64 > q {
+        h -= 1;
+    }
+    while ((h + 1) * (h + 1)) as f64 <= q {
+        h += 1;
+    }
+    h
+}
+
+/// The gauge of every window offset, padded by [`TABLE_MARGIN`] columns on each side, with
+/// the window mask `M` folded in: entries outside the window (and in the margins) hold
+/// [`GaugeTable::MASKED`] and mask 0. Row `t` is the vertical offset `t - R`, column `m` the
+/// horizontal offset `m - R - TABLE_MARGIN`.
 pub struct GaugeTable<T> {
     /// The window radius `R`.
     pub big_r: usize,
-    /// Row length, `2R + 1 + 2 MARGIN`.
+    /// Row length, `2R + 1 + 2 TABLE_MARGIN`.
     pub stride: usize,
     /// `(2R + 1) * stride` gauges.
     pub gauge: Vec<T>,
+    /// The window mask `M` (1 inside the window, 0 outside and in the margins), laid out
+    /// as the gauges.
+    pub mask: Vec<T>,
     /// Per row, the largest `|offset|` inside the window (`None` if none).
     pub half_width: Vec<Option<usize>>,
 }
 
 impl<T: Real> GaugeTable<T> {
-    /// Gauge value of masked entries: any tap reading it weighs 0.
+    /// Gauge value of masked entries (their mask is 0; the value keeps the step finite).
     pub const MASKED: f64 = 1.0e6;
 
     /// The table of `aperture`'s gauge at offsets `sign * (dx, dy)` (`sign = 1`: tap
     /// offsets `y - x`, for gathers; `-1`: receiver offsets `x - y`, for scatters).
     pub fn new(aperture: &Aperture, big_r: usize, sign: isize) -> Self {
         let r = big_r as isize;
-        let stride = 2 * big_r + 1 + 2 * MARGIN;
+        let stride = 2 * big_r + 1 + 2 * TABLE_MARGIN;
         let mut gauge = vec![T::c(Self::MASKED); (2 * big_r + 1) * stride];
+        let mut mask = vec![T::zero(); (2 * big_r + 1) * stride];
         let mut half_width = vec![None; 2 * big_r + 1];
         for dy in -r..=r {
             let t = (dy + r) as usize;
             for dx in -r..=r {
                 let (tx, ty) = (sign * dx, sign * dy);
                 if model::in_window(tx, ty, big_r) {
-                    gauge[t * stride + (dx + r) as usize + MARGIN] =
+                    gauge[t * stride + (dx + r) as usize + TABLE_MARGIN] =
                         T::c(aperture.gauge(tx as f64, ty as f64));
+                    mask[t * stride + (dx + r) as usize + TABLE_MARGIN] = T::one();
                     let hw: &mut Option<usize> = &mut half_width[t];
                     *hw = Some(hw.unwrap_or(0).max(dx.unsigned_abs()));
                 }
@@ -211,6 +234,7 @@ impl<T: Real> GaugeTable<T> {
             big_r,
             stride,
             gauge,
+            mask,
             half_width,
         }
     }
@@ -219,10 +243,20 @@ impl<T: Real> GaugeTable<T> {
     #[inline(always)]
     pub fn chunk(&self, dy: isize, dx0: isize) -> &[T; LANES] {
         let t = (dy + self.big_r as isize) as usize;
-        let m = (dx0 + (self.big_r + MARGIN) as isize) as usize;
+        let m = (dx0 + (self.big_r + TABLE_MARGIN) as isize) as usize;
         self.gauge[t * self.stride + m..t * self.stride + m + LANES]
             .try_into()
             .expect("LANES gauges")
+    }
+
+    /// The [`LANES`] window masks of row offset `dy` from column offset `dx0`.
+    #[inline(always)]
+    pub fn mask_chunk(&self, dy: isize, dx0: isize) -> &[T; LANES] {
+        let t = (dy + self.big_r as isize) as usize;
+        let m = (dx0 + (self.big_r + TABLE_MARGIN) as isize) as usize;
+        self.mask[t * self.stride + m..t * self.stride + m + LANES]
+            .try_into()
+            .expect("LANES")
     }
 
     /// The window's half-width on row `dy` (`None` if the row is outside the window).
@@ -250,7 +284,7 @@ pub struct DiscRow {
 
 /// The row `dy` of a disc of radius `r` with ring widths `rings`, clipped to the window's
 /// half-width `window_hw`; `sign` as in [`Shape::interval`]. `None` if the row holds no tap.
-#[inline]
+#[inline(always)]
 pub fn disc_row(
     shape: &Shape,
     rings: Rings,
@@ -282,21 +316,33 @@ pub fn disc_row(
     })
 }
 
-/// The soft step of a ring tap: `S(max(r - g, STEP_ARGUMENT_MIN))`, 0 where the gauge is
-/// [`GaugeTable::MASKED`] (outside the window).
+/// The soft step of a ring tap, `S(max(r - g, STEP_ARGUMENT_MIN)) M`, with the window
+/// mask `m` (1 or 0, [`GaugeTable::mask_chunk`]): branch-free.
 #[inline(always)]
-pub fn ring_step<T: Real, const SHARP: bool>(r: T, g: T) -> T {
+pub fn ring_step<T: Real, const SHARP: bool>(r: T, g: T, m: T) -> T {
     let u = (r - g).max(T::c(STEP_ARGUMENT_MIN));
     let s = if SHARP {
         model::sharp_step_fast(u)
     } else {
         model::soft_step_fast(u)
     };
-    if g < T::c(GaugeTable::<T>::MASKED) {
-        s
-    } else {
-        T::zero()
+    s * m
+}
+
+/// [`ring_step`] of a chunk of [`LANES`] taps of row `dy` from offset `dx0`.
+#[inline(always)]
+pub fn ring_steps<T: Real, const SHARP: bool>(
+    table: &GaugeTable<T>,
+    r: T,
+    dy: isize,
+    dx0: isize,
+) -> [T; LANES] {
+    let (g, m) = (table.chunk(dy, dx0), table.mask_chunk(dy, dx0));
+    let mut s = [T::zero(); LANES];
+    for l in 0..LANES {
+        s[l] = ring_step::<T, SHARP>(r, g[l], m[l]);
     }
+    s
 }
 
 #[cfg(test)]

@@ -81,7 +81,7 @@ pub(crate) fn render<T: Real>(
     let (w, h) = (stack.width, stack.height);
     let tables = WindowTables::<T>::new(settings);
     let big_r = tables.big_r;
-    let band_rows = BAND_ROWS.max(2 * big_r);
+    let band_rows = SUB_ROWS.max(BAND_ROWS).max(2 * big_r);
     let aperture = ApertureEval::<T>::new(&settings.aperture);
     let shape = Shape::of(&settings.aperture);
     let options = settings.model();

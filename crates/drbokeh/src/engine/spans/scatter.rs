@@ -10,14 +10,16 @@
 
 use super::coverage::CoverageCtx;
 use super::focus::{classify, Nodes, StepClass, FOCUS_CUTOFF, MAX_NODES};
-use super::geometry::{disc_row, ring_step, GaugeTable, Rings, Shape, LANES, MARGIN};
+use super::geometry::{
+    disc_row, floor_sqrt, ring_steps, DiscRow, GaugeTable, Rings, Shape, LANES, MARGIN,
+};
 use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, ScatterStep};
 use crate::Real;
 
 /// Receiver rows per sub-band (one task, one set of accumulators).
-pub const SUB_ROWS: usize = 32;
+pub const SUB_ROWS: usize = 128;
 
 /// Colour and weight: the 4 components of a source's weight `v = a / A (Ilin, 1)`.
 const COMPONENTS: usize = 4;
@@ -94,8 +96,15 @@ struct Source<T> {
     /// Column relative to the band's first receiver.
     xs: isize,
     r: T,
+    /// Rows reached above and below (`r + u_out`, at most the window).
+    reach: isize,
+    /// `(r - u_in)^2` (negative when `r < u_in`: no interior) and `(r + u_out)^2`.
+    inner_sq: f64,
+    outer_sq: f64,
     rel_disp: T,
     v: [T; COMPONENTS],
+    /// `v` in f64, for the span writes.
+    v64: [f64; COMPONENTS],
 }
 
 /// The depth-step coefficients of a source at the interpolation points.
@@ -136,9 +145,13 @@ fn sub_band<T: Real>(
     transmittance: &mut [T],
 ) -> u64 {
     let mut acc = new_acc(ctx, (y0, y1));
-    let work = match ctx.b.step {
-        ScatterStep::Sharp => scatter_sources::<T, true>(ctx, (y0, y1), &mut acc),
-        ScatterStep::Paper => scatter_sources::<T, false>(ctx, (y0, y1), &mut acc),
+    let focus = acc.focus.iter().any(Option::is_some);
+    let rows = (y0, y1);
+    let work = match (ctx.b.step, focus) {
+        (ScatterStep::Sharp, false) => scatter_sources::<T, true, false>(ctx, rows, &mut acc),
+        (ScatterStep::Sharp, true) => scatter_sources::<T, true, true>(ctx, rows, &mut acc),
+        (ScatterStep::Paper, false) => scatter_sources::<T, false, false>(ctx, rows, &mut acc),
+        (ScatterStep::Paper, true) => scatter_sources::<T, false, true>(ctx, rows, &mut acc),
     };
     let cover = finish::<T>(ctx, (y0, y1), &acc, linear, transmittance);
     work + cover
@@ -184,9 +197,10 @@ fn new_acc<T: Real>(ctx: &BandLayer<'_, T>, (y0, y1): (usize, usize)) -> Acc<T> 
 }
 
 /// Adds every source whose disc reaches rows `y0 .. y1` into `acc`. Returns the work done
-/// (ring lanes plus span writes).
+/// (ring lanes plus span writes). Source row by source row; within one, disc row by disc
+/// row across all its sources, so that the receiver rows being written stay in cache.
 #[inline(always)]
-fn scatter_sources<T: Real, const SHARP: bool>(
+fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
     ctx: &BandLayer<'_, T>,
     (y0, y1): (usize, usize),
     acc: &mut Acc<T>,
@@ -195,13 +209,21 @@ fn scatter_sources<T: Real, const SHARP: bool>(
     let (pad, stride) = (b.pad as isize, b.stride);
     let big_r = ctx.table.big_r as isize;
     let outer = ctx.rings.outer_px;
+    let circle = matches!(ctx.shape, Shape::Circle);
+    let mut profiles = Profiles::default();
     let mut work = 0u64;
     // Padded rows whose sources can reach y0 .. y1 (the window bounds every reach).
     let py0 = (y0 as isize + pad - big_r).max(0) as usize;
     let py1 = ((y1 as isize + pad + big_r) as usize).min(b.rows);
     let w = ctx.width as isize;
+    let mut sources: Vec<Source<T>> = Vec::with_capacity(stride);
+    let mut caches: Vec<Option<Coefficients<T>>> = Vec::with_capacity(stride);
     for py in py0..py1 {
         let ys = py as isize - pad;
+        // This row's sources that reach the sub-band.
+        sources.clear();
+        let (lo, hi) = (y0 as isize - ys, y1 as isize - 1 - ys);
+        let mut max_reach = -1;
         for px in 0..stride {
             let i = py * stride + px;
             let a = b.alpha[i];
@@ -210,22 +232,64 @@ fn scatter_sources<T: Real, const SHARP: bool>(
             }
             let r = b.radius[i];
             let reach = (r.f64() + outer).min(big_r as f64).floor() as isize;
-            let dy0 = (y0 as isize - ys).max(-reach);
-            let dy1 = (y1 as isize - 1 - ys).min(reach);
             let xs = px as isize - pad;
-            if dy0 > dy1 || xs + reach < 0 || xs - reach >= w {
+            if lo.max(-reach) > hi.min(reach) || xs + reach < 0 || xs - reach >= w {
                 continue;
             }
             let wa = a * b.inv_area[i];
-            let src = Source {
+            let v = [wa * b.red[i], wa * b.green[i], wa * b.blue[i], wa];
+            let (rf, rings) = (r.f64(), ctx.rings);
+            let inner = rf - rings.inner_px;
+            sources.push(Source {
                 xs,
                 r,
+                reach,
+                inner_sq: if inner >= 0.0 { inner * inner } else { -1.0 },
+                outer_sq: (rf + rings.outer_px).powi(2),
                 rel_disp: b.rel_disp[i],
-                v: [wa * b.red[i], wa * b.green[i], wa * b.blue[i], wa],
+                v,
+                v64: v.map(|c| c.f64()),
+            });
+            max_reach = max_reach.max(reach);
+        }
+        if sources.is_empty() {
+            continue;
+        }
+        caches.clear();
+        caches.resize_with(sources.len(), || None);
+        let (dy0, dy1) = (lo.max(-max_reach), hi.min(max_reach));
+        if circle {
+            // Rows dy and -dy share their intervals and ring profile.
+            let top = dy0.abs().max(dy1.abs());
+            let bottom = if dy0 <= 0 && dy1 >= 0 {
+                0
+            } else {
+                dy0.abs().min(dy1.abs())
             };
-            let mut coefficients = None;
+            for ady in bottom..=top {
+                let rows = [ady, -ady]
+                    .map(|dy| (dy >= dy0 && dy <= dy1).then(|| (ys + dy) as usize - y0));
+                let rows = [rows[0], if ady == 0 { None } else { rows[1] }];
+                if rows == [None, None] {
+                    continue;
+                }
+                work += scatter_rows_circle::<T, SHARP, FOCUS>(
+                    ctx,
+                    (&sources, &mut caches),
+                    ady,
+                    rows,
+                    acc,
+                    &mut profiles,
+                );
+            }
+        } else {
             for dy in dy0..=dy1 {
-                work += scatter_row::<T, SHARP>(ctx, &src, dy, (ys + dy) as usize - y0, acc, &mut coefficients);
+                let row = (ys + dy) as usize - y0;
+                for (src, cache) in sources.iter().zip(caches.iter_mut()) {
+                    if src.reach >= dy.abs() {
+                        work += scatter_row::<T, SHARP, FOCUS>(ctx, src, dy, row, acc, cache);
+                    }
+                }
             }
         }
     }
@@ -251,9 +315,270 @@ fn coefficients<'c, T: Real>(
     })
 }
 
-/// One row `dy` of a source's disc into receiver row `row` of the sub-band.
+/// The interior span of a disc row into sub-band row `row` (and its focus row).
 #[inline(always)]
-fn scatter_row<T: Real, const SHARP: bool>(
+fn interior<T: Real, const FOCUS: bool>(
+    ctx: &BandLayer<'_, T>,
+    src: &Source<T>,
+    (lo, hi): (isize, isize),
+    row: usize,
+    acc: &mut Acc<T>,
+    cache: &mut Option<Coefficients<T>>,
+) -> u64 {
+    let w = ctx.width as isize;
+    let (xa, xb) = ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
+    if xa > xb {
+        return 0;
+    }
+    let base = row * (acc.width + 1) * COMPONENTS;
+    let (ia, ib) = (
+        base + xa as usize * COMPONENTS,
+        base + (xb as usize + 1) * COMPONENTS,
+    );
+    let start: &mut [f64; COMPONENTS] = (&mut acc.diff[ia..ia + COMPONENTS])
+        .try_into()
+        .expect("COMPONENTS");
+    for c in 0..COMPONENTS {
+        start[c] += src.v64[c];
+    }
+    let end: &mut [f64; COMPONENTS] = (&mut acc.diff[ib..ib + COMPONENTS])
+        .try_into()
+        .expect("COMPONENTS");
+    for c in 0..COMPONENTS {
+        end[c] -= src.v64[c];
+    }
+    if !FOCUS {
+        return 2;
+    }
+    let Some(f) = acc.focus[row].as_mut() else {
+        return 2;
+    };
+    let (qa, qb) = (xa.max(f.x0 as isize), xb.min(f.x1 as isize));
+    if qa > qb || !f.any_in(qa, qb) {
+        return 2;
+    }
+    let nodes = ctx.nodes.expect("focus rows need nodes");
+    let k = coefficients(nodes, src.rel_disp, cache);
+    interior_focus(f, nodes.len(), k, &src.v, (qa as usize, qb as usize));
+    4
+}
+
+/// The chunk runs of a disc row's ring (receiver columns), each extended outwards to whole
+/// chunks: `(first start, last start, step)`; left of the interior from its inner end
+/// leftwards, right of it (or the whole ring when there is no interior) from its inner end
+/// rightwards. Iterate with [`next_chunk`].
+#[inline(always)]
+fn chunk_runs(disc: &DiscRow, xs: isize, w: isize) -> [(isize, isize, isize); 2] {
+    let lanes = LANES as isize;
+    let mut runs = [(0isize, -1isize, lanes); 2];
+    let clip = |(lo, hi): (isize, isize)| ((xs + lo).max(0), (xs + hi).min(w - 1));
+    match (disc.interior, disc.left, disc.right) {
+        (None, Some(run), _) => {
+            let (xa, xb) = clip(run);
+            runs[0] = (xa, xb, lanes);
+        }
+        (Some(_), left, right) => {
+            if let Some(run) = left {
+                let (xa, xb) = clip(run);
+                // Down to the last start whose chunk still reaches xa.
+                runs[0] = (xb - (lanes - 1), xa - (lanes - 1), -lanes);
+            }
+            if let Some(run) = right {
+                let (xa, xb) = clip(run);
+                runs[1] = (xa, xb, lanes);
+            }
+        }
+        (None, None, _) => {}
+    }
+    runs
+}
+
+/// Whether chunk start `c` lies within the run `(first, last, step)`.
+#[inline(always)]
+fn in_run(c: isize, (_, last, step): (isize, isize, isize)) -> bool {
+    if step > 0 {
+        c <= last
+    } else {
+        c >= last
+    }
+}
+
+/// The ring profiles of one disc row of a source row's sources (the circle's two-phase
+/// sweep): the steps of every source are evaluated first (independent chunks, which the
+/// processor overlaps), then added.
+#[derive(Default)]
+struct Profiles<T> {
+    /// Steps, each source's run of chunks followed by [`LANES`] zeros.
+    values: Vec<T>,
+    /// Per source with a row here: its index, row intervals and the offset of `|dx| = 0`
+    /// (`dx = 0` for rows without an interior, whose profile is stored mirrored).
+    entries: Vec<(usize, DiscRow, isize)>,
+}
+
+/// Rows `dy = +-ady` (`rows`: their sub-band rows, where in the sub-band) of every source
+/// of a source row (a circle): intervals and ring profile computed once for both rows.
+#[inline(always)]
+fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
+    ctx: &BandLayer<'_, T>,
+    (sources, caches): (&[Source<T>], &mut [Option<Coefficients<T>>]),
+    ady: isize,
+    rows: [Option<usize>; 2],
+    acc: &mut Acc<T>,
+    profiles: &mut Profiles<T>,
+) -> u64 {
+    let Some(hw) = ctx.table.window_half_width(ady) else {
+        return 0;
+    };
+    let lanes = LANES as isize;
+    // Phase 1: intervals and steps. The profile S(r - g(dx, ady)) is evaluated at ring
+    // columns |dx| = k0 ..= outer_hi (the circle is symmetric in dx), followed by zeros so
+    // that the outward extension of the chunks adds nothing.
+    profiles.entries.clear();
+    // At most 3 n + 2 LANES values per source (a mirrored run of n = R + 1 steps).
+    let need = sources.len() * (3 * (ctx.table.big_r + 1) + 3 * LANES);
+    if profiles.values.len() < need {
+        profiles.values.resize(need, T::zero());
+    }
+    let values = &mut profiles.values;
+    let mut next = 0usize;
+    // The previous source's half-widths guess the next one's.
+    let mut guess = (0, 0);
+    for (i, src) in sources.iter().enumerate() {
+        if src.reach < ady {
+            continue;
+        }
+        let Some(disc) = circle_row(src, ady, hw, &mut guess) else {
+            continue;
+        };
+        let k0 = disc.interior.map_or(0, |(_, hi)| hi + 1);
+        let outer_hi = match (disc.interior, disc.left, disc.right) {
+            (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
+            _ => k0 - 1,
+        };
+        let n = (outer_hi + 1 - k0).max(0) as usize;
+        let mut k = k0;
+        while k <= outer_hi {
+            let s = ring_steps::<T, SHARP>(ctx.table, src.r, ady, k);
+            let at = next + (k - k0) as usize;
+            values[at..at + LANES].copy_from_slice(&s);
+            k += lanes;
+        }
+        // Zeros from outer_hi + 1 on (over the last chunk's excess).
+        values[next + n..next + n + LANES].fill(T::zero());
+        if disc.interior.is_none() {
+            // A run across dx = 0: mirror into [zeros | S(n-1) .. S(1) | S(0) .. | zeros]
+            // after the right half, with dx = 0 at `centre`.
+            let centre = next + n + LANES + n - 1;
+            for kk in 0..n + LANES {
+                values[centre + kk] = values[next + kk];
+            }
+            for kk in 1..n {
+                values[centre - kk] = values[next + kk];
+            }
+            profiles.entries.push((i, disc, centre as isize));
+            next = centre + n + LANES;
+        } else {
+            profiles.entries.push((i, disc, next as isize - k0));
+            next += n + LANES;
+        }
+    }
+    // Phase 2: interiors and ring chunks.
+    let values = &profiles.values;
+    let w = ctx.width as isize;
+    let mut work = 0;
+    for &(i, disc, base) in &profiles.entries {
+        let (src, cache) = (&sources[i], &mut caches[i]);
+        if let Some(run) = disc.interior {
+            for row in rows.into_iter().flatten() {
+                work += interior::<T, FOCUS>(ctx, src, run, row, acc, cache);
+            }
+        }
+        // The common row: an interior, a ring of at most one chunk on each side (its
+        // profile then holds zeros beyond the ring's end), both chunks within the
+        // accumulators' margins: two chunks per row, no runs.
+        if let (Some((_, hi)), Some(_)) = (disc.interior, disc.right) {
+            let k0 = hi + 1;
+            let outer_hi = disc.right.map_or(hi, |(_, o)| o);
+            let one_chunk = outer_hi - k0 < lanes && disc.left == Some((-outer_hi, -k0));
+            if one_chunk && src.xs >= k0 && src.xs + k0 <= w {
+                let at = (base + k0) as usize;
+                let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                let left: [T; LANES] = std::array::from_fn(|l| right[LANES - 1 - l]);
+                for row in rows.into_iter().flatten() {
+                    ring_add::<T, FOCUS>(ctx, src, row, src.xs + k0, right, acc, cache);
+                    ring_add::<T, FOCUS>(ctx, src, row, src.xs - k0 - (lanes - 1), left, acc, cache);
+                    work += 2 * LANES as u64;
+                }
+                continue;
+            }
+        }
+        let runs = chunk_runs(&disc, src.xs, w);
+        for row in rows.into_iter().flatten() {
+            for run in runs {
+                let mut start = run.0;
+                while in_run(start, run) {
+                    let dx0 = start - src.xs;
+                    let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
+                        // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
+                        let at = (base - (dx0 + lanes - 1)) as usize;
+                        let half: &[T; LANES] =
+                            values[at..at + LANES].try_into().expect("LANES");
+                        std::array::from_fn(|l| half[LANES - 1 - l])
+                    } else {
+                        let at = (base + dx0) as usize;
+                        values[at..at + LANES].try_into().expect("LANES")
+                    };
+                    ring_add::<T, FOCUS>(ctx, src, row, start, s, acc, cache);
+                    work += LANES as u64;
+                    start += run.2;
+                }
+            }
+        }
+    }
+    work
+}
+
+/// A circle's disc row `ady` ([`disc_row`] for [`Shape::Circle`], the same intervals),
+/// with the half-widths found from `guess` (the previous source's, updated).
+#[inline(always)]
+fn circle_row<T: Real>(
+    src: &Source<T>,
+    ady: isize,
+    hw: usize,
+    guess: &mut (isize, isize),
+) -> Option<DiscRow> {
+    let (hw, dy2) = (hw as isize, (ady * ady) as f64);
+    let q_out = src.outer_sq - dy2;
+    if src.outer_sq < 0.0 || q_out < 0.0 {
+        return None;
+    }
+    guess.1 = floor_sqrt(q_out, guess.1);
+    let ho = guess.1.min(hw);
+    let q_in = src.inner_sq - dy2;
+    let hi = if src.inner_sq >= 0.0 && q_in >= 0.0 {
+        guess.0 = floor_sqrt(q_in, guess.0);
+        Some(guess.0.min(hw))
+    } else {
+        None
+    };
+    Some(match hi {
+        None => DiscRow {
+            interior: None,
+            left: Some((-ho, ho)),
+            right: None,
+        },
+        Some(hi) => DiscRow {
+            interior: Some((-hi, hi)),
+            left: (-ho < -hi).then_some((-ho, -hi - 1)),
+            right: (hi < ho).then_some((hi + 1, ho)),
+        },
+    })
+}
+
+/// One row `dy` of a source's disc into receiver row `row` of the sub-band (any convex
+/// shape: the ring is evaluated chunk by chunk from the gauge table).
+#[inline(always)]
+fn scatter_row<T: Real, const SHARP: bool, const FOCUS: bool>(
     ctx: &BandLayer<'_, T>,
     src: &Source<T>,
     dy: isize,
@@ -267,69 +592,21 @@ fn scatter_row<T: Real, const SHARP: bool>(
     let Some(disc) = disc_row(ctx.shape, ctx.rings, src.r.f64(), dy, hw, -1.0) else {
         return 0;
     };
+    let mut work = 0;
+    if let Some(run) = disc.interior {
+        work += interior::<T, FOCUS>(ctx, src, run, row, acc, cache);
+    }
     let w = ctx.width as isize;
-    let mut work = 0u64;
-    let has_focus = acc.focus[row].is_some();
-    if let Some((lo, hi)) = disc.interior {
-        let (xa, xb) = ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
-        if xa <= xb {
-            work += 2;
-            let base = row * (acc.width + 1) * COMPONENTS;
-            for c in 0..COMPONENTS {
-                acc.diff[base + xa as usize * COMPONENTS + c] += src.v[c].f64();
-                acc.diff[base + (xb as usize + 1) * COMPONENTS + c] -= src.v[c].f64();
-            }
-            if has_focus {
-                let nodes = ctx.nodes.expect("focus rows need nodes");
-                let f = acc.focus[row].as_mut().expect("checked");
-                let (qa, qb) = (xa.max(f.x0 as isize), xb.min(f.x1 as isize));
-                if qa <= qb && f.any_in(qa, qb) {
-                    let k = coefficients(nodes, src.rel_disp, cache);
-                    interior_focus(f, nodes.len(), k, &src.v, (qa as usize, qb as usize));
-                    work += 2;
-                }
-            }
+    for run in chunk_runs(&disc, src.xs, w) {
+        let mut start = run.0;
+        while in_run(start, run) {
+            let s = ring_steps::<T, SHARP>(ctx.table, src.r, dy, start - src.xs);
+            ring_add::<T, FOCUS>(ctx, src, row, start, s, acc, cache);
+            work += LANES as u64;
+            start += run.2;
         }
     }
-    // Ring runs, extended outwards to whole chunks (their extra taps are exact model
-    // values, or 0 outside the window).
-    let mut chunk = |start: isize| {
-        ring_chunk::<T, SHARP>(ctx, src, dy, row, start, acc, cache);
-    };
-    let mut n = 0u64;
-    match (disc.interior, disc.left, disc.right) {
-        (None, Some((lo, hi)), _) => {
-            let (xa, xb) = ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
-            let mut c = xa;
-            while c <= xb {
-                chunk(c);
-                n += 1;
-                c += LANES as isize;
-            }
-        }
-        (Some(_), left, right) => {
-            if let Some((lo, hi)) = left {
-                let (xa, xb) = ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
-                let mut c = xb - (LANES as isize - 1);
-                while c + LANES as isize - 1 >= xa {
-                    chunk(c);
-                    n += 1;
-                    c -= LANES as isize;
-                }
-            }
-            if let Some((lo, hi)) = right {
-                let (xa, xb) = ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
-                let mut c = xa;
-                while c <= xb {
-                    chunk(c);
-                    n += 1;
-                    c += LANES as isize;
-                }
-            }
-        }
-        (None, None, _) => {}
-    }
-    work + n * LANES as u64
+    work
 }
 
 /// The interior span `qa ..= qb` of a source into a focus row's difference arrays.
@@ -365,22 +642,19 @@ fn interior_focus<T: Real>(
     }
 }
 
-/// One chunk of [`LANES`] ring taps at receivers `start .. start + LANES` of row `row`.
+/// Adds one chunk of [`LANES`] ring taps with steps `s` at receivers
+/// `start .. start + LANES` of row `row` (and, where they are in focus, their occlusion
+/// sums with the exact depth step).
 #[inline(always)]
-fn ring_chunk<T: Real, const SHARP: bool>(
+fn ring_add<T: Real, const FOCUS: bool>(
     ctx: &BandLayer<'_, T>,
     src: &Source<T>,
-    dy: isize,
     row: usize,
     start: isize,
+    mut s: [T; LANES],
     acc: &mut Acc<T>,
     cache: &mut Option<Coefficients<T>>,
 ) {
-    let g = ctx.table.chunk(dy, start - src.xs);
-    let mut s = [T::zero(); LANES];
-    for l in 0..LANES {
-        s[l] = ring_step::<T, SHARP>(src.r, g[l]);
-    }
     let len = acc.ring_len();
     let base = row * COMPONENTS * len + (start + MARGIN as isize) as usize;
     for c in 0..COMPONENTS {
@@ -391,6 +665,9 @@ fn ring_chunk<T: Real, const SHARP: bool>(
         for l in 0..LANES {
             out[l] = out[l] + s[l] * v;
         }
+    }
+    if !FOCUS {
+        return;
     }
     let Some(f) = acc.focus[row].as_mut() else {
         return;
@@ -514,10 +791,9 @@ fn focus_sums<T: Real>(
         }
         (T::c(s), T::one())
     } else {
-        let g0 = ctx.table.chunk(0, -(LANES as isize / 2))[LANES / 2];
         let s = match b.step {
-            ScatterStep::Sharp => ring_step::<T, true>(r, g0),
-            ScatterStep::Paper => ring_step::<T, false>(r, g0),
+            ScatterStep::Sharp => ring_steps::<T, true>(ctx.table, r, 0, 0)[0],
+            ScatterStep::Paper => ring_steps::<T, false>(ctx.table, r, 0, 0)[0],
         };
         (model::depth_step_fast(T::zero()), s)
     };
