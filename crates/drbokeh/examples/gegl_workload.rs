@@ -31,7 +31,9 @@ fn main() -> drbokeh::Result<()> {
         .map_or(1024, |s| s.parse().expect("SIZE is a number"));
     if let Some(engine) = flag("--render") {
         let engine: Engine = engine.parse()?;
-        let preset: Preset = flag("--preset").unwrap_or_else(|| "physical".into()).parse()?;
+        let preset: Preset = flag("--preset")
+            .unwrap_or_else(|| "physical".into())
+            .parse()?;
         let repeat: usize = flag("--repeat").map_or(1, |n| n.parse().expect("a number"));
         let (stack, settings) = gegl_workload(size, size, preset);
         for _ in 0..repeat {
@@ -43,7 +45,12 @@ fn main() -> drbokeh::Result<()> {
     }
     let dir = PathBuf::from(positional.first().expect("usage: gegl_workload DIR [SIZE]"));
     let (rgb, radius) = gegl_scene(size, size);
-    drbokeh::io::write_output(&dir.join("image.png"), &rgb, drbokeh::io::BitDepth::Eight, |v| v)?;
+    drbokeh::io::write_output(
+        &dir.join("image.png"),
+        &rgb,
+        drbokeh::io::BitDepth::Eight,
+        |v| v,
+    )?;
     let map = Image::from_vec(
         size,
         size,
@@ -52,6 +59,9 @@ fn main() -> drbokeh::Result<()> {
     )?;
     drbokeh::io::write_grey(&dir.join("disparity.png"), &map)?;
     drbokeh::io::write_grey(&dir.join("mask.png"), &map)?;
-    println!("wrote {}/{{image,disparity,mask}}.png ({size}x{size})", dir.display());
+    println!(
+        "wrote {}/{{image,disparity,mask}}.png ({size}x{size})",
+        dir.display()
+    );
     Ok(())
 }

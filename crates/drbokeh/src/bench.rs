@@ -151,8 +151,14 @@ pub fn gegl_scene(width: usize, height: usize) -> (Image<f32>, Image<f32>) {
     for _ in 0..(width * height / 4000).max(1) {
         let (cx, cy) = (rng.next() * width as f64, rng.next() * height as f64);
         let rad = 1.0 + 2.0 * rng.next();
-        let (x0, x1) = ((cx - rad).max(0.0) as usize, ((cx + rad) as usize + 1).min(width));
-        let (y0, y1) = ((cy - rad).max(0.0) as usize, ((cy + rad) as usize + 1).min(height));
+        let (x0, x1) = (
+            (cx - rad).max(0.0) as usize,
+            ((cx + rad) as usize + 1).min(width),
+        );
+        let (y0, y1) = (
+            (cy - rad).max(0.0) as usize,
+            ((cy + rad) as usize + 1).min(height),
+        );
         for y in y0..y1 {
             for x in x0..x1 {
                 if (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2) <= rad * rad {
@@ -173,7 +179,11 @@ pub const GEGL_BLUR_K: f64 = 33.0;
 
 /// The GEGL-equivalent workload as a single opaque layer (disparity `r / 33`) and its
 /// settings (focus 0, K 33, window just large enough).
-pub fn gegl_workload(width: usize, height: usize, preset: Preset) -> (LayerStack<f32>, RenderSettings) {
+pub fn gegl_workload(
+    width: usize,
+    height: usize,
+    preset: Preset,
+) -> (LayerStack<f32>, RenderSettings) {
     let (rgb, radius) = gegl_scene(width, height);
     let disparity = Image::from_vec(
         width,

@@ -51,8 +51,7 @@ fn blobs(w: usize, h: usize) -> LayerStack<f32> {
             let r = ((x as f32 - 20.0).powi(2) + (y as f32 - 45.0).powi(2)).sqrt();
             front.alpha.data[y * w + x] = (1.0 - (r - 9.0) / 2.0).clamp(0.0, 1.0);
             for c in 0..3 {
-                back.rgb_encoded.data[3 * (y * w + x) + c] =
-                    ((x / 5 + y / 7 + c) % 3) as f32 / 2.0;
+                back.rgb_encoded.data[3 * (y * w + x) + c] = ((x / 5 + y / 7 + c) % 3) as f32 / 2.0;
             }
             back.disparity.data[y * w + x] = 0.1 + 0.8 * x as f32 / w as f32;
         }
@@ -66,7 +65,10 @@ fn check(stack: &LayerStack<f32>, s: &RenderSettings, what: &str) -> (f64, f64) 
     let (max, mean) = display_diff(&fast, &spans);
     eprintln!("{what}: max {max:.2e} mean {mean:.2e} {stats:?}");
     assert_eq!(stats.tap_layers, 0, "{what}: every band-layer as spans");
-    assert!(max <= 1e-3 && mean <= 1e-4, "{what}: max {max:e} mean {mean:e}");
+    assert!(
+        max <= 1e-3 && mean <= 1e-4,
+        "{what}: max {max:e} mean {mean:e}"
+    );
     (max, mean)
 }
 
@@ -86,7 +88,11 @@ fn spans_match_fast_with_focus_and_blur_side_by_side() {
     for (focus, k, window) in [(0.85, 30.0, 61), (0.5, 30.0, 61), (0.3, 100.0, 121)] {
         for aperture in apertures() {
             for s in presets(settings(focus, k, window, aperture.clone())) {
-                check(&stack, &s, &format!("blobs f {focus} K {k} {aperture:?} {:?}", s.preset));
+                check(
+                    &stack,
+                    &s,
+                    &format!("blobs f {focus} K {k} {aperture:?} {:?}", s.preset),
+                );
             }
         }
     }

@@ -12,7 +12,9 @@
 
 use super::geometry::Rings;
 use super::scatter::SUB_ROWS;
-use crate::engine::fast::tiles::{source_block_max, tile_max_radius, WindowTables, TILE, TILE_ROWS};
+use crate::engine::fast::tiles::{
+    source_block_max, tile_max_radius, WindowTables, TILE, TILE_ROWS,
+};
 use crate::engine::planes::Planes;
 use crate::model;
 use crate::presets::RenderSettings;

@@ -299,9 +299,7 @@ pub fn disc_row(
         (lo <= hi).then_some((lo, hi))
     };
     let outer = clip(shape.interval(r + rings.outer_px, dy, sign)?)?;
-    let inner = shape
-        .interval(r - rings.inner_px, dy, sign)
-        .and_then(clip);
+    let inner = shape.interval(r - rings.inner_px, dy, sign).and_then(clip);
     Some(match inner {
         None => DiscRow {
             interior: None,
@@ -386,9 +384,7 @@ mod tests {
                 for c in [0.0, 0.4, 1.0, 2.5, 7.3, 19.9] {
                     for vy in -22isize..=22 {
                         let inside: Vec<isize> = (-40isize..=40)
-                            .filter(|&vx| {
-                                a.gauge(sign * vx as f64, sign * vy as f64) <= c + 1e-9
-                            })
+                            .filter(|&vx| a.gauge(sign * vx as f64, sign * vy as f64) <= c + 1e-9)
                             .collect();
                         let got = shape.interval(c, vy, sign);
                         match got {
@@ -412,7 +408,11 @@ mod tests {
         for step in [ScatterStep::Paper, ScatterStep::Sharp] {
             let rings = Rings::of(step);
             let s_in = model::scatter_step(step, rings.inner_px);
-            assert!(1.0 - s_in <= INTERIOR_DEFECT * 1.0001, "{step:?}: {}", 1.0 - s_in);
+            assert!(
+                1.0 - s_in <= INTERIOR_DEFECT * 1.0001,
+                "{step:?}: {}",
+                1.0 - s_in
+            );
             let s_out = model::scatter_step(step, -rings.outer_px);
             assert!(s_out <= 1.4e-7, "{step:?}: {s_out}");
             let s_min = model::scatter_step(step, STEP_ARGUMENT_MIN) as f32;

@@ -175,7 +175,8 @@ fn new_acc<T: Real>(ctx: &BandLayer<'_, T>, (y0, y1): (usize, usize)) -> Acc<T> 
                 count[x + 1] = count[x] + u32::from(e[x] >= cutoff);
             }
             let mut rel_disp = vec![T::zero(); x1 - x0 + 1 + 2 * MARGIN];
-            rel_disp[MARGIN..MARGIN + x1 - x0 + 1].copy_from_slice(&b.rel_disp[row + x0..=row + x1]);
+            rel_disp[MARGIN..MARGIN + x1 - x0 + 1]
+                .copy_from_slice(&b.rel_disp[row + x0..=row + x1]);
             let mut f = FocusRow {
                 x0,
                 x1,
@@ -267,8 +268,8 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
                 dy0.abs().min(dy1.abs())
             };
             for ady in bottom..=top {
-                let rows = [ady, -ady]
-                    .map(|dy| (dy >= dy0 && dy <= dy1).then(|| (ys + dy) as usize - y0));
+                let rows =
+                    [ady, -ady].map(|dy| (dy >= dy0 && dy <= dy1).then(|| (ys + dy) as usize - y0));
                 let rows = [rows[0], if ady == 0 { None } else { rows[1] }];
                 if rows == [None, None] {
                     continue;
@@ -506,7 +507,15 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
                 let left: [T; LANES] = std::array::from_fn(|l| right[LANES - 1 - l]);
                 for row in rows.into_iter().flatten() {
                     ring_add::<T, FOCUS>(ctx, src, row, src.xs + k0, right, acc, cache);
-                    ring_add::<T, FOCUS>(ctx, src, row, src.xs - k0 - (lanes - 1), left, acc, cache);
+                    ring_add::<T, FOCUS>(
+                        ctx,
+                        src,
+                        row,
+                        src.xs - k0 - (lanes - 1),
+                        left,
+                        acc,
+                        cache,
+                    );
                     work += 2 * LANES as u64;
                 }
                 continue;
@@ -521,8 +530,7 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
                     let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
                         // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
                         let at = (base - (dx0 + lanes - 1)) as usize;
-                        let half: &[T; LANES] =
-                            values[at..at + LANES].try_into().expect("LANES");
+                        let half: &[T; LANES] = values[at..at + LANES].try_into().expect("LANES");
                         std::array::from_fn(|l| half[LANES - 1 - l])
                     } else {
                         let at = (base + dx0) as usize;
