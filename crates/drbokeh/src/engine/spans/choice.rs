@@ -21,7 +21,7 @@ use crate::presets::RenderSettings;
 use crate::Real;
 
 /// The cost of one disc row on the span path, in taps of the fast engine.
-pub const SPAN_ROW_COST: f64 = 28.0;
+pub const SPAN_ROW_COST: f64 = 12.0;
 
 /// The cost of scanning one candidate source of a sub-band, in taps.
 pub const SCAN_COST: f64 = 0.5;
