@@ -7,7 +7,7 @@
 //! | [`Engine::Reference`] | `reference.rs` (plain loops) | the threaded adjoint |
 //! | [`Engine::Threaded`] | `threaded/forward.rs` | `threaded/adjoint.rs` (exact, every window tap) |
 //! | [`Engine::Fast`] | `fast/forward.rs` (bands, tiles, reach, lanes) | `fast/adjoint/` (same schedule) |
-//! | [`Engine::Spans`], [`Engine::Auto`] | `spans/` (row spans, per band-layer choice of spans or the fast taps) | `spans/` |
+//! | [`Engine::Spans`], [`Engine::Auto`] | `spans/` (row spans, per band-layer choice of spans or the fast taps) | the fast adjoint (no span adjoint yet) |
 //!
 //! Shared by the schedules: `planes.rs` (the padded struct-of-arrays planes), `tape.rs`
 //! (what the forward records, the gradients), `backward.rs` (the chain rule around each
@@ -135,6 +135,9 @@ pub fn render_with_tape<T: Real>(
 ///   the blur radii that reach them, the soft step's tail beyond `r + 4.5` px dropped; see
 ///   `engine/fast/adjoint/`); the output is `render(.., Engine::Fast, ..)`, bit for bit,
 ///   and the gradients agree with the exact adjoint to about 1e-6 of their largest value.
+/// - [`Engine::Spans`] and [`Engine::Auto`]: no span-structured adjoint yet; the tape is the
+///   fast engine's (output `render(.., Engine::Fast, ..)`, within the span engine's bounds of
+///   `render(.., Engine::Spans, ..)`), and [`Tape::engine`] says [`Engine::Fast`].
 pub fn render_with_tape_on<T: Real>(
     stack: &LayerStack<T>,
     settings: &RenderSettings,
