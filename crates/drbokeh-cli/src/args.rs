@@ -143,13 +143,10 @@ pub struct ExecArgs {
 }
 
 impl ExecArgs {
-    /// The engine to use: `auto` resolves to [`drbokeh::Engine::Auto`] in f32 and threaded in f64.
+    /// The engine to use: `auto` is [`drbokeh::Engine::auto`] (spans or taps per band and
+    /// layer in f32, threaded in f64).
     pub fn engine(&self) -> Result<drbokeh::Engine> {
-        Ok(match self.engine.as_str() {
-            "auto" if self.f64 => drbokeh::Engine::Threaded,
-            "auto" => drbokeh::Engine::Auto,
-            other => other.parse()?,
-        })
+        Ok(drbokeh::Engine::parse_or_auto(&self.engine, self.f64)?)
     }
 
     /// Sets up the global thread pool.

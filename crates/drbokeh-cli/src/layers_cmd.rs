@@ -1,14 +1,13 @@
 //! `drbokeh layers`: from a photo (image + disparity, optional matte) to a layer stack.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
-use drbokeh::io::{self, BitDepth, DepthKind, DisparityOptions};
+use drbokeh::io::{self, DepthKind, DisparityOptions};
 use drbokeh::layering::{self, LayeringOptions};
 use drbokeh::model::Tone;
 use drbokeh::presets::Transfer;
 use drbokeh::scene::{self, Photo, PhotoFiles};
-use drbokeh::{Image, LayerStack};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Decompose a photo into a layer stack (no learned model, no downloads).
@@ -107,15 +106,7 @@ pub fn run(a: &LayersArgs) -> Result<()> {
         ..LayeringOptions::default()
     };
     opts.validate()?;
-    if let Some(n) = a.threads {
-        if n == 0 || n > 1024 {
-            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("cannot start the thread pool")?;
-    }
+    crate::args::init_threads(a.threads)?;
     let (map, kind) = match (&a.disparity, &a.depth) {
         (Some(p), None) => (p, DepthKind::Disparity),
         (None, Some(p)) => (p, DepthKind::Depth),
@@ -144,7 +135,7 @@ pub fn run(a: &LayersArgs) -> Result<()> {
     let elapsed = t0.elapsed().as_secs_f64();
     io::write_stack(&a.output, &d.stack)?;
     if !a.no_preview {
-        write_previews(&a.output, &d.stack)?;
+        layering::write_previews(&a.output, &d.stack)?;
     }
     if !a.quiet {
         for n in &d.notes {
@@ -169,55 +160,6 @@ pub fn run(a: &LayersArgs) -> Result<()> {
             d.stack.height,
             a.output.display()
         );
-    }
-    Ok(())
-}
-
-/// `dir/name.npz` -> `dir/name.SUFFIX`.
-fn sibling(output: &Path, suffix: &str) -> PathBuf {
-    let stem = output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "stack".into());
-    output.with_file_name(format!("{stem}.{suffix}"))
-}
-
-/// Per layer: colour over a checkerboard by alpha, and disparity (rescaled to the stack's
-/// disparity range) as 16-bit grey.
-fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
-    let (w, h) = (stack.width, stack.height);
-    let (lo, hi) = stack
-        .layers
-        .iter()
-        .flat_map(|l| l.disparity.data.iter())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    for (k, l) in stack.layers.iter().enumerate() {
-        let mut over = Image::<f32>::new(w, h, 3);
-        for y in 0..h {
-            for x in 0..w {
-                let a = l.alpha.at(x, y, 0);
-                let checker = if (x / 8 + y / 8) % 2 == 0 { 0.8 } else { 0.55 };
-                for c in 0..3 {
-                    *over.at_mut(x, y, c) = a * l.rgb_encoded.at(x, y, c) + (1.0 - a) * checker;
-                }
-            }
-        }
-        io::write_output(
-            &sibling(output, &format!("layer{k}.png")),
-            &over,
-            BitDepth::Eight,
-            |v| v,
-        )?;
-        let disp = Image::from_vec(
-            w,
-            h,
-            1,
-            l.disparity.data.iter().map(|&d| (d - lo) / span).collect(),
-        )?;
-        io::write_grey(&sibling(output, &format!("layer{k}.disparity.png")), &disp)?;
     }
     Ok(())
 }

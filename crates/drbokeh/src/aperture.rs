@@ -169,6 +169,7 @@ impl Aperture {
     /// shape's boundary. Euclidean distance for the circle; for the polygon,
     /// `|v| cos(delta) / cos(pi/n)` with `delta` the angle to the nearest edge normal.
     /// Not used by kernel apertures (which are not scaled copies of a convex shape).
+    /// Equation M5 of docs/model.md.
     pub fn gauge(&self, dx: f64, dy: f64) -> f64 {
         let dist = (dx * dx + dy * dy).sqrt();
         match self {

@@ -5,10 +5,12 @@
 //! the fast engine (linear light and display-encoded); the GEGL-equivalent workload
 //! ([`gegl_scene`]) and a radius sweep of the span engine.
 
+use crate::camera::WindowCap;
 use crate::demo;
 use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
+use crate::model;
 use crate::presets::{Preset, RenderSettings};
 use crate::stack::{Layer, LayerStack};
 use crate::{Result, Window};
@@ -215,7 +217,11 @@ pub fn workloads(quick: bool) -> Vec<Workload> {
     };
     let spans_fast = || vec![Engine::Fast, Engine::Auto, Engine::Spans];
     let demo_stack: LayerStack<f32> = demo::scene(640, 426);
-    let demo_window = Window::auto(30.0 * demo_stack.max_defocus(demo::DEMO_FOCUS) + 1.0);
+    let demo_window = model::automatic_window(
+        30.0,
+        demo_stack.max_defocus(demo::DEMO_FOCUS),
+        WindowCap::Clipped,
+    );
     add(
         "demo-3L-K30",
         demo_stack,
@@ -263,7 +269,11 @@ pub fn workloads(quick: bool) -> Vec<Workload> {
     add(
         "0.07MP-1L-radius100",
         uniform_blur(256, 256),
-        settings(0.5, 200.0, Window::auto_unclipped(101.0)),
+        settings(
+            0.5,
+            200.0,
+            model::automatic_window(200.0, 0.5, WindowCap::Unclipped),
+        ),
         spans_fast(),
     );
     // The GEGL-equivalent workload (issue 18), both presets.
@@ -339,7 +349,11 @@ pub fn workloads(quick: bool) -> Vec<Workload> {
         add(
             "0.07MP-1L-radius200",
             uniform_blur(256, 256),
-            settings(0.5, 400.0, Window::auto_unclipped(201.0)),
+            settings(
+                0.5,
+                400.0,
+                model::automatic_window(400.0, 0.5, WindowCap::Unclipped),
+            ),
             spans_fast(),
         );
     }

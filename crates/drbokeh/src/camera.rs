@@ -52,7 +52,8 @@ impl Window {
 
     /// The automatic window: the smallest that holds a scatter radius of `max_radius_px`
     /// plus [`AUTO_WINDOW_MARGIN_PX`], at least `R = 1`, capped as `cap` says. The one rule
-    /// every automatic window follows (front ends, evaluation, gallery, benchmarks).
+    /// every automatic window follows (front ends, evaluation, gallery, benchmarks;
+    /// equation M22 of docs/model.md, with [`crate::model::automatic_window`]).
     pub fn automatic(max_radius_px: f64, cap: WindowCap) -> Self {
         let r = (max_radius_px + AUTO_WINDOW_MARGIN_PX).ceil().max(1.0) as usize;
         let cap = match cap {

@@ -194,18 +194,17 @@ impl View {
         Tone::new(self.preset.options().transfer, self.gamma, self.offset)
     }
 
-    /// The settings for rendering `stack`, and a note when the automatic window clips the
-    /// largest blur. `is_demo` selects the demo's focus for [`Focus::Auto`].
+    /// The settings for rendering `stack` with `engine`, and a note when the automatic
+    /// window clips the largest blur. [`Focus::Auto`] is the centre pixel here
+    /// ([`resolve`] gives the demo its subject).
     pub fn settings_for<T: Real>(
         &self,
         stack: &LayerStack<T>,
         engine: Engine,
-        is_demo: bool,
     ) -> Result<(RenderSettings, Option<String>)> {
         let focus = match self.focus {
             Focus::Disparity(f) => f,
             Focus::At { x, y } => stack.disparity_at(x, y)?,
-            Focus::Auto if is_demo => demo::DEMO_FOCUS,
             Focus::Auto => stack.disparity_at(stack.width / 2, stack.height / 2)?,
         };
         self.settings_with_focus(focus, |f| stack.max_defocus(f), engine)
@@ -278,7 +277,17 @@ pub struct Scene<T> {
 /// window is not capped for the radius-bounded engines ([`Engine::Fast`], [`Engine::Spans`],
 /// [`Engine::Auto`]).
 pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Result<Scene<T>> {
-    let is_demo = matches!(source, Source::Demo { .. });
+    let demo_view;
+    let view = match (&source, view.focus) {
+        (Source::Demo { .. }, Focus::Auto) => {
+            demo_view = View {
+                focus: Focus::Disparity(demo::DEMO_FOCUS),
+                ..view.clone()
+            };
+            &demo_view
+        }
+        _ => view,
+    };
     let (stack, mut notes) = match source {
         Source::Stack(stack) => (stack, vec![]),
         Source::StackFile(path) => (io::read_stack(&path)?, vec![]),
@@ -289,7 +298,7 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
         Source::PhotoFiles(files) => photo_stack(read_photo(&files, &view.tone())?, view, engine)?,
         Source::Photo(photo) => photo_stack(photo, view, engine)?,
     };
-    let (settings, note) = view.settings_for(&stack, engine, is_demo)?;
+    let (settings, note) = view.settings_for(&stack, engine)?;
     notes.extend(note);
     Ok(Scene {
         stack,
@@ -322,7 +331,7 @@ fn photo_stack<T: Real>(
     };
     // Focus and blur as they resolve on the image as one layer (same disparity); this
     // also checks the view before the decomposition's work.
-    let (settings, _) = view.settings_for(&single, engine, false)?;
+    let (settings, _) = view.settings_for(&single, engine)?;
     let Layer {
         rgb_encoded,
         disparity,

@@ -1,4 +1,4 @@
-//! The reference engine: single-threaded loops that read like the spec. Borders are
+//! The reference engine: single-threaded loops that read like docs/model.md. Borders are
 //! reflected on the fly; every term comes from [`crate::model`].
 
 use crate::image::Image;

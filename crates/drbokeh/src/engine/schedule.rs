@@ -21,6 +21,29 @@ pub enum Engine {
     Auto,
 }
 
+impl Engine {
+    /// The default schedule: [`Engine::Auto`] in single precision (spans or the fast
+    /// engine's taps per band and layer, whichever is predicted cheaper; its tape is the fast
+    /// adjoint's), [`Engine::Threaded`] in double precision (every window tap: the equation
+    /// and its gradient exactly, for checks).
+    pub fn auto(double_precision: bool) -> Engine {
+        if double_precision {
+            Engine::Threaded
+        } else {
+            Engine::Auto
+        }
+    }
+
+    /// Parses `spans`, `fast`, `threaded`, `reference`, or `auto` ([`Engine::auto`] for the
+    /// precision).
+    pub fn parse_or_auto(name: &str, double_precision: bool) -> Result<Engine> {
+        match name {
+            "auto" => Ok(Engine::auto(double_precision)),
+            other => other.parse(),
+        }
+    }
+}
+
 impl std::str::FromStr for Engine {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
@@ -35,5 +58,25 @@ impl std::str::FromStr for Engine {
                 format!("unknown engine '{s}' (available: auto, spans, fast, threaded, reference)"),
             )),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Engine;
+
+    #[test]
+    fn auto_is_spans_or_taps_in_f32_and_threaded_in_f64() {
+        assert_eq!(Engine::parse_or_auto("auto", false).unwrap(), Engine::Auto);
+        assert_eq!(
+            Engine::parse_or_auto("auto", true).unwrap(),
+            Engine::Threaded
+        );
+        assert_eq!(
+            Engine::parse_or_auto("reference", false).unwrap(),
+            Engine::Reference
+        );
+        let e = Engine::parse_or_auto("warp", true).unwrap_err();
+        assert!(matches!(e, crate::Error::InvalidParameter { ref name, .. } if name == "engine"));
     }
 }

@@ -1,5 +1,5 @@
 //! The one SIMD dispatch mechanism: a kernel is written once as a generic `#[inline(always)]`
-//! function and [`avx2_dispatch!`] compiles it twice, for the baseline target and with AVX2
+//! function and `avx2_dispatch!` compiles it twice, for the baseline target and with AVX2
 //! enabled, choosing at run time. Both copies do the same arithmetic in the same order
 //! (lanes are explicit in the source, FMA is not enabled), so they give the same bytes;
 //! only the vector width differs. `tests/simd.rs` checks that by forcing the baseline copy

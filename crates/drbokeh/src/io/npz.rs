@@ -1,7 +1,7 @@
 //! NPZ layer stacks: keys `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W); float32 or
 //! float64; uint8/uint16 colour is scaled to [0, 1].
 
-use super::{open, write_atomic};
+use super::files::{open, write_atomic};
 use crate::engine::Gradients;
 use crate::image::{check_dimensions, Image};
 use crate::stack::{Layer, LayerStack};

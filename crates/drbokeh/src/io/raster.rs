@@ -1,7 +1,8 @@
 //! Raster images through the `image` crate: PNG (8/16-bit), JPEG, TIFF, EXR.
 //! Colour read from PNG/JPEG/TIFF is display-encoded; EXR holds linear light.
 
-use super::{extension, npz::read_any, open, write_atomic};
+use super::files::{extension, open, write_atomic};
+use super::npz::read_any;
 use crate::image::{check_dimensions, Image};
 use crate::{Error, Real, Result};
 use image::{DynamicImage, ImageFormat};

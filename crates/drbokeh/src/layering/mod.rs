@@ -44,9 +44,11 @@
 
 mod cuts;
 mod fill;
+mod preview;
 mod telea;
 
 pub use fill::{push_pull_fill, smooth_fill};
+pub use preview::{sibling, write_previews};
 pub use telea::{inpaint_telea, Inpainted, Region, TeleaOptions};
 
 use crate::image::{check_dimensions, Image};

@@ -4,7 +4,7 @@
 //! `L = w1 |render - target|_1 + wg G + wh HSSIM`. Every term here comes as a pair:
 //! a forward function returning the loss value, and a `*_grad` function returning the value
 //! together with its gradient (the vector-Jacobian product for an upstream gradient of 1)
-//! with respect to the optimised image, as an [`Image`] of the same shape.
+//! with respect to the optimised image, as an [`Image`](crate::Image) of the same shape.
 //!
 //! - [`l1`](mod@l1): mean absolute difference ([`l1::l1`], [`l1::l1_grad`]).
 //! - [`smoothness`]: edge-aware disparity smoothness over a 4-level pyramid.
@@ -14,7 +14,7 @@
 //!
 //! All functions are generic over [`Real`](crate::Real) (`f32`, `f64`); sums are
 //! accumulated in `f64`. Inputs with mismatched shapes, or too small for a window or
-//! pyramid, are reported as [`Error`], never a panic.
+//! pyramid, are reported as [`Error`](crate::Error), never a panic.
 
 mod check;
 pub mod l1;

@@ -4,9 +4,11 @@
 use crate::Real;
 
 /// The regulariser in `B = C / (W + 1e-8)`.
+/// Equation M14 of docs/model.md.
 pub const WEIGHT_EPSILON: f64 = 1e-8;
 
 /// Running sums `C = sum Ilin(y) c(y,x)` and `W = sum c(y,x)` for one receiver and layer.
+/// Equation M14 of docs/model.md.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Accumulator<T> {
     /// Weighted colour sum.
@@ -17,6 +19,7 @@ pub struct Accumulator<T> {
 
 impl<T: Real> Accumulator<T> {
     /// Adds one tap.
+    /// Equation M14 of docs/model.md.
     #[inline(always)]
     pub fn add(&mut self, rgb_linear: [T; 3], c: T) {
         for (acc, v) in self.colour.iter_mut().zip(rgb_linear) {
@@ -26,6 +29,7 @@ impl<T: Real> Accumulator<T> {
     }
 
     /// Layer colour `B = C / (W + 1e-8)`.
+    /// Equation M14 of docs/model.md.
     #[inline(always)]
     pub fn layer_colour(&self) -> [T; 3] {
         let w = self.weight + T::c(WEIGHT_EPSILON);
@@ -34,6 +38,7 @@ impl<T: Real> Accumulator<T> {
 }
 
 /// Front-to-back compositing `out = sum_l B_l o_l T_l`, `T_0 = 1`, `T_{l+1} = T_l (1 - o_l)`.
+/// Equation M17 of docs/model.md.
 #[inline]
 pub fn composite<T: Real>(layers: impl IntoIterator<Item = ([T; 3], T)>) -> [T; 3] {
     let mut out = [T::zero(); 3];
@@ -49,6 +54,7 @@ pub fn composite<T: Real>(layers: impl IntoIterator<Item = ([T; 3], T)>) -> [T; 
 
 /// What one layer contributes at one pixel: the weight sum `W`, the layer colour
 /// `B = C / (W + 1e-8)` and the coverage `o` (what the adjoint records of the forward).
+/// Equation M17 of docs/model.md.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LayerAtPixel<T> {
     /// Weight sum `W`.
@@ -60,6 +66,7 @@ pub struct LayerAtPixel<T> {
 }
 
 /// The gradients reaching one layer's sums at one pixel.
+/// Equation M17 of docs/model.md.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LayerSumGradients<T> {
     /// `dL/dC` per channel.
@@ -75,6 +82,7 @@ pub struct LayerSumGradients<T> {
 /// layers' sums. With `U_l = B_l o_l + (1 - o_l) U_{l+1}`: `dU_l/dB_l = o_l`,
 /// `dU_l/do_l = B_l - U_{l+1}`, `dU_l/dU_{l+1} = 1 - o_l`; `B = C / (W + 1e-8)` gives
 /// `dL/dC = dL/dB / (W + 1e-8)` and `dL/dW = -sum_c dL/dB_c B_c / (W + 1e-8)`.
+/// Equation M17 of docs/model.md.
 pub fn composite_backward<T: Real>(
     layers: &[LayerAtPixel<T>],
     g_linear: [T; 3],

@@ -5,6 +5,7 @@
 use crate::Real;
 
 /// Focus weight of a receiver `e(x) = exp(-3 (K d(x))^2)`: 1 in focus, 0 when very blurred.
+/// Equation M10 of docs/model.md.
 #[inline(always)]
 pub fn focus_weight<T: Real>(blur_k: T, rel_disp_x: T) -> T {
     let kd = blur_k * rel_disp_x;
@@ -13,6 +14,7 @@ pub fn focus_weight<T: Real>(blur_k: T, rel_disp_x: T) -> T {
 
 /// Partial derivatives of [`focus_weight`] from its value `e`:
 /// `(de/dd_x, de/dK) = (-6 K^2 d_x e, -6 K d_x^2 e)`.
+/// Equation M10 of docs/model.md.
 #[inline(always)]
 pub fn focus_weight_derivatives<T: Real>(blur_k: T, rel_disp_x: T, e: T) -> (T, T) {
     let six = T::c(6.0);
@@ -23,12 +25,14 @@ pub fn focus_weight_derivatives<T: Real>(blur_k: T, rel_disp_x: T, e: T) -> (T, 
 }
 
 /// Depth step `s(D) = 1/2 + 1/2 tanh(10 (D - 0.1))`.
+/// Equation M11 of docs/model.md.
 #[inline(always)]
 pub fn depth_step<T: Real>(disp_difference: T) -> T {
     T::c(0.5) + T::c(0.5) * (T::c(10.0) * (disp_difference - T::c(0.1))).tanh()
 }
 
 /// [`depth_step`] with `tanh(z) = 1 - 2 / (exp(2z) + 1)` through [`Real::exp_fast`].
+/// Equation M11 of docs/model.md.
 #[inline(always)]
 pub fn depth_step_fast<T: Real>(disp_difference: T) -> T {
     let z = T::c(20.0) * (disp_difference - T::c(0.1));
@@ -37,6 +41,7 @@ pub fn depth_step_fast<T: Real>(disp_difference: T) -> T {
 }
 
 /// Derivative of [`depth_step`]: `5 (1 - tanh^2(10 (D - 0.1)))`.
+/// Equation M11 of docs/model.md.
 #[inline(always)]
 pub fn depth_step_derivative<T: Real>(disp_difference: T) -> T {
     let t = (T::c(10.0) * (disp_difference - T::c(0.1))).tanh();
@@ -47,12 +52,14 @@ pub fn depth_step_derivative<T: Real>(disp_difference: T) -> T {
 /// `s = 1/2 + 1/2 tanh(u)` gives `1 - tanh^2(u) = 4 s (1 - s)`, this equals
 /// [`depth_step_derivative`]; with [`depth_step_fast`] it is the fast engine's form (no
 /// second transcendental).
+/// Equation M11 of docs/model.md.
 #[inline(always)]
 pub fn depth_step_derivative_from_value<T: Real>(s: T) -> T {
     T::c(20.0) * s * (T::one() - s)
 }
 
 /// [`depth_step_fast`] and its derivative from the value, `(s, 20 s (1 - s))`.
+/// Equation M11 of docs/model.md.
 #[inline(always)]
 pub fn depth_step_fast_with_derivative<T: Real>(disp_difference: T) -> (T, T) {
     let s = depth_step_fast(disp_difference);
@@ -61,6 +68,7 @@ pub fn depth_step_fast_with_derivative<T: Real>(disp_difference: T) -> (T, T) {
 
 /// The occlusion from the receiver's focus weight `e` and the depth step's value `s`:
 /// `O = 1 + e (s - 1)`.
+/// Equation M12 of docs/model.md.
 #[inline(always)]
 pub fn occlusion_from_step<T: Real>(focus_weight_x: T, s: T) -> T {
     T::one() + focus_weight_x * (s - T::one())
@@ -68,6 +76,7 @@ pub fn occlusion_from_step<T: Real>(focus_weight_x: T, s: T) -> T {
 
 /// Soft occlusion `O(y,x) = 1 + e(x) (s(d(y) - d(x)) - 1)` (supplement eq. 1 with its sign
 /// slip corrected); the centre tap has `O(x,x) = 1`, which callers handle.
+/// Equation M12 of docs/model.md.
 #[inline(always)]
 pub fn occlusion<T: Real>(focus_weight_x: T, rel_disp_y: T, rel_disp_x: T) -> T {
     occlusion_from_step(focus_weight_x, depth_step(rel_disp_y - rel_disp_x))
@@ -75,6 +84,7 @@ pub fn occlusion<T: Real>(focus_weight_x: T, rel_disp_y: T, rel_disp_x: T) -> T 
 
 /// Partial derivatives of [`occlusion`] (non-centre taps):
 /// `dO/dd_y = e s'(D)`, `dO/dd_x|_e = -e s'(D)`, `dO/de = s(D) - 1`, with `D = d_y - d_x`.
+/// Equation M12 of docs/model.md.
 #[inline(always)]
 pub fn occlusion_derivatives<T: Real>(
     focus_weight_x: T,
@@ -87,6 +97,7 @@ pub fn occlusion_derivatives<T: Real>(
 }
 
 /// [`occlusion`] through [`depth_step_fast`] (the fast engine's form).
+/// Equation M12 of docs/model.md.
 #[inline(always)]
 pub fn occlusion_fast<T: Real>(focus_weight_x: T, rel_disp_y: T, rel_disp_x: T) -> T {
     occlusion_from_step(focus_weight_x, depth_step_fast(rel_disp_y - rel_disp_x))
@@ -94,6 +105,7 @@ pub fn occlusion_fast<T: Real>(focus_weight_x: T, rel_disp_y: T, rel_disp_x: T) 
 
 /// [`occlusion_fast`] and its derivative with respect to the source's disparity,
 /// `(O, dO/dd_y = e s'(D))`.
+/// Equation M12 of docs/model.md.
 #[inline(always)]
 pub fn occlusion_fast_with_derivative<T: Real>(
     focus_weight_x: T,
@@ -107,6 +119,7 @@ pub fn occlusion_fast_with_derivative<T: Real>(
 /// The receiver's factors of the occlusion's derivatives in the fast form, free of `e`:
 /// `(s'(D), s(D) - 1)`, so that `dO/dd_x|_e = -e s'(D)` and `dO/de = s(D) - 1`
 /// ([`occlusion_derivatives`]); summed over taps before `e` multiplies them.
+/// Equation M12 of docs/model.md.
 #[inline(always)]
 pub fn occlusion_receiver_factors_fast<T: Real>(rel_disp_y: T, rel_disp_x: T) -> (T, T) {
     let (s, ds) = depth_step_fast_with_derivative(rel_disp_y - rel_disp_x);

@@ -1,8 +1,9 @@
 //! The replaceable terms of the model: one enum per term, and [`ModelOptions`], one field
-//! per term. The presets ([`crate::presets`]) are named choices of these; each variant's
-//! formula lives beside its derivative in the sibling modules (docs/model.md, "Options").
+//! per term. The presets (`crate::presets`) are named choices of these; each variant's
+//! formula lives beside its derivative in the sibling modules (docs/model.md, "Presets").
 
 /// How the layer coverage `o_l(x)` is computed.
+/// Equations M15, M16 of docs/model.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Coverage {
     /// The paper: mean of alpha over the square of half-size `min(floor(r(x)/2), R)`.
@@ -14,6 +15,7 @@ pub enum Coverage {
 }
 
 /// The radius of the receiver's disc in [`Coverage::SoftDisc`].
+/// Equation M16 of docs/model.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum CoverageRadius {
     /// The receiver's scatter radius `r(x) = K |d(x)| + 1` (the scatter term's radius).
@@ -24,7 +26,7 @@ pub enum CoverageRadius {
 }
 
 /// The pixel footprint added to the circle of confusion in the scatter radius
-/// `r = K |d| + footprint` (spec: "the +1 is the pixel footprint").
+/// `r = K |d| + footprint` (docs/model.md, M2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Footprint {
     /// The paper's `+1`.
@@ -40,9 +42,11 @@ pub enum Footprint {
 
 impl Footprint {
     /// The largest footprint of any variant ([`Footprint::Pixel`]), in pixels.
+    /// Equation M2 of docs/model.md.
     pub const LARGEST_PX: f64 = 1.0;
 
     /// The footprint in pixels.
+    /// Equation M2 of docs/model.md.
     pub fn px(self) -> f64 {
         match self {
             Footprint::Pixel => 1.0,
@@ -54,6 +58,7 @@ impl Footprint {
 
 /// The soft step `S(r - dist)` of the scatter term and the source area it is normalised by
 /// (formulas in [`crate::model::scatter_step`] and [`crate::model::source_area`]).
+/// Equations M3, M4, M7 of docs/model.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ScatterStep {
     /// The supplement's eq. 2, `S = 1 / (1 + 10 exp(-3 (r - dist)))`, with area `r^2`. Its
@@ -69,6 +74,7 @@ pub enum ScatterStep {
 }
 
 /// The display transfer used to linearise inputs and encode the output.
+/// Equations M18, M19 of docs/model.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Transfer {
     /// The paper: `lin = (I + offset)^g` with the camera's gamma and offset.
@@ -78,6 +84,7 @@ pub enum Transfer {
 }
 
 /// The replaceable terms of the model, one field per term.
+/// Section "Presets" of docs/model.md.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct ModelOptions {
     /// Layer coverage term.
@@ -94,6 +101,7 @@ pub struct ModelOptions {
 
 impl ModelOptions {
     /// The published model's choices.
+    /// Section "Presets" of docs/model.md.
     pub const PAPER: ModelOptions = ModelOptions {
         coverage: Coverage::PaperBox,
         coverage_radius: CoverageRadius::Scatter,
@@ -102,6 +110,7 @@ impl ModelOptions {
         step: ScatterStep::Paper,
     };
     /// The `physical` preset's choices.
+    /// Section "Presets" of docs/model.md.
     pub const PHYSICAL: ModelOptions = ModelOptions {
         coverage: Coverage::SoftDisc,
         coverage_radius: CoverageRadius::CircleOfConfusion,

@@ -10,6 +10,7 @@ use crate::stack::Layer;
 use crate::Real;
 
 /// The camera and model options in float type `T`, for evaluating per-pixel terms.
+/// Equations M1, M2, M10, M18-M20 of docs/model.md.
 #[derive(Clone, Copy, Debug)]
 pub struct PixelModel<T> {
     /// Blur strength `K`.
@@ -26,6 +27,7 @@ pub struct PixelModel<T> {
 
 impl<T: Real> PixelModel<T> {
     /// The per-pixel model of a camera under `options`.
+    /// Section "Per-pixel terms" of docs/model.md.
     pub fn new(camera: &Camera, options: &ModelOptions) -> Self {
         PixelModel {
             blur_k: T::c(camera.blur_k),
@@ -37,18 +39,21 @@ impl<T: Real> PixelModel<T> {
     }
 
     /// Relative disparity `d = disp - f`.
+    /// Equation M1 of docs/model.md.
     #[inline(always)]
     pub fn rel_disp(&self, disparity: T) -> T {
         relative_disparity(disparity, self.focus_disparity)
     }
 
     /// Scatter radius `r = K |d| + footprint`.
+    /// Equation M2 of docs/model.md.
     #[inline(always)]
     pub fn radius_px(&self, rel_disp: T) -> T {
         scatter_radius_px(self.blur_k, rel_disp, self.footprint_px)
     }
 
     /// Focus weight `e = exp(-3 (K d)^2)`.
+    /// Equation M10 of docs/model.md.
     #[inline(always)]
     pub fn focus_weight(&self, rel_disp: T) -> T {
         focus_weight(self.blur_k, rel_disp)
@@ -56,12 +61,14 @@ impl<T: Real> PixelModel<T> {
 
     /// Linear colour of a display-encoded channel value (with the highlight boost) and its
     /// derivatives `(lin, dlin/dI, dlin/dd)` ([`source_linear_with_derivatives`]).
+    /// Equation M20 of docs/model.md.
     #[inline(always)]
     pub fn linear_with_derivatives(&self, encoded: T, rel_disp: T) -> (T, T, T) {
         source_linear_with_derivatives(encoded, rel_disp, self.highlight, &self.tone)
     }
 
     /// Linear colour of a display-encoded channel value.
+    /// Equations M18-M20 of docs/model.md.
     #[inline(always)]
     pub fn linear(&self, encoded: T, rel_disp: T) -> T {
         self.linear_with_derivatives(encoded, rel_disp).0
@@ -70,6 +77,7 @@ impl<T: Real> PixelModel<T> {
 
 /// Per-pixel terms of one layer, computed once before the gather: linear colour (after
 /// the optional highlight boost), alpha, relative disparity `d`, radius `r`, focus weight `e`.
+/// Equations M1, M2, M10, M18-M20 of docs/model.md.
 #[derive(Clone, Debug)]
 pub struct PreparedLayer<T> {
     /// Width in pixels.
@@ -89,6 +97,7 @@ pub struct PreparedLayer<T> {
 }
 
 /// Computes the per-pixel terms of a layer for a camera under model `options`.
+/// Equations M1, M2, M10, M18-M20 of docs/model.md.
 pub fn prepare_layer<T: Real>(
     layer: &Layer<T>,
     camera: &Camera,

@@ -6,7 +6,8 @@ use super::options::{Footprint, ScatterStep};
 use crate::camera::{Window, WindowCap};
 use crate::Real;
 
-/// Relative disparity `d = disp - f` (spec: "Relative disparity").
+/// Relative disparity `d = disp - f`.
+/// Equation M1 of docs/model.md.
 #[inline(always)]
 pub fn relative_disparity<T: Real>(disparity: T, focus: T) -> T {
     disparity - focus
@@ -14,6 +15,7 @@ pub fn relative_disparity<T: Real>(disparity: T, focus: T) -> T {
 
 /// Scatter radius in pixels `r = K |d| + footprint`: the paper's footprint is 1
 /// ([`Footprint`]); `dr/dd = K sign(d)`, `dr/dK = |d|` either way.
+/// Equation M2 of docs/model.md.
 #[inline(always)]
 pub fn scatter_radius_px<T: Real>(blur_k: T, rel_disp: T, footprint_px: T) -> T {
     blur_k * rel_disp.abs() + footprint_px
@@ -21,6 +23,7 @@ pub fn scatter_radius_px<T: Real>(blur_k: T, rel_disp: T, footprint_px: T) -> T 
 
 /// `d|d|/dd`, the sign of `d` (0 at the kink): `dr/dd = K` times this and `dr/dK = |d|`
 /// ([`scatter_radius_px`]).
+/// Equation M2 of docs/model.md.
 #[inline(always)]
 pub fn scatter_radius_sign<T: Real>(rel_disp: T) -> T {
     if rel_disp > T::zero() {
@@ -36,6 +39,7 @@ pub fn scatter_radius_sign<T: Real>(rel_disp: T) -> T {
 /// `max_defocus`: `K max|d| + 1`, with the largest pixel footprint of any preset
 /// ([`Footprint::LARGEST_PX`]), so that one window serves every preset and method compared
 /// on a scene.
+/// Equation M22 of docs/model.md.
 pub fn largest_scatter_radius_px(blur_k: f64, max_defocus: f64) -> f64 {
     scatter_radius_px(blur_k.abs(), max_defocus, Footprint::LARGEST_PX)
 }
@@ -43,18 +47,21 @@ pub fn largest_scatter_radius_px(blur_k: f64, max_defocus: f64) -> f64 {
 /// The automatic window for a stack whose largest relative disparity over pixels with
 /// alpha > 0 is `max_defocus` ([`largest_scatter_radius_px`] and [`Window::automatic`]):
 /// the one rule of every automatic window (front ends, evaluation, gallery, benchmarks).
+/// Equation M22 of docs/model.md.
 pub fn automatic_window(blur_k: f64, max_defocus: f64, cap: WindowCap) -> Window {
     Window::automatic(largest_scatter_radius_px(blur_k, max_defocus), cap)
 }
 
 /// Soft scatter step `S = 1 / (1 + 10 exp(-3 (r - dist)))` (supplement eq. 2, distance not
 /// squared), as a function of `r - dist`.
+/// Equation M3 of docs/model.md.
 #[inline(always)]
 pub fn soft_step<T: Real>(r_minus_dist: T) -> T {
     T::one() / (T::one() + T::c(10.0) * (T::c(-3.0) * r_minus_dist).exp())
 }
 
 /// [`soft_step`] with [`Real::exp_fast`] (the fast engine's form; same formula).
+/// Equation M3 of docs/model.md.
 #[inline(always)]
 pub fn soft_step_fast<T: Real>(r_minus_dist: T) -> T {
     T::one() / (T::one() + T::c(10.0) * (T::c(-3.0) * r_minus_dist).exp_fast())
@@ -70,9 +77,11 @@ pub fn soft_step_fast<T: Real>(r_minus_dist: T) -> T {
 /// `0.21 * 5.33 e^{-13.5} / 0.25 < 6.2e-6` against at least `S(0.5)/0.25 = 1.24`: 5e-6.
 /// The sharp step of preset `physical` ([`sharp_step`], `S <= e^{-6 (dist - r)}` beyond r)
 /// drops at most `(pi/3) (r + 4.67) e^{-27} / (pi r^2 + 1/2) < 1e-11` of weight there.
+/// Equation M21 of docs/model.md.
 pub const SCATTER_TAIL_PX: f64 = 4.5;
 
 /// Derivative of [`soft_step`] with respect to `r - dist`, from its value: `3 S (1 - S)`.
+/// Equation M3 of docs/model.md.
 #[inline(always)]
 pub fn soft_step_derivative<T: Real>(s: T) -> T {
     T::c(3.0) * s * (T::one() - s)
@@ -80,18 +89,21 @@ pub fn soft_step_derivative<T: Real>(s: T) -> T {
 
 /// The sharp step of preset `physical` ([`ScatterStep::Sharp`]):
 /// `S = 1 / (1 + exp(-6 (r - dist)))`, half weight at `dist = r`.
+/// Equation M4 of docs/model.md.
 #[inline(always)]
 pub fn sharp_step<T: Real>(r_minus_dist: T) -> T {
     T::one() / (T::one() + (T::c(-6.0) * r_minus_dist).exp())
 }
 
 /// [`sharp_step`] with [`Real::exp_fast`] (the fast engine's form; same formula).
+/// Equation M4 of docs/model.md.
 #[inline(always)]
 pub fn sharp_step_fast<T: Real>(r_minus_dist: T) -> T {
     T::one() / (T::one() + (T::c(-6.0) * r_minus_dist).exp_fast())
 }
 
 /// The scatter term's soft step under `step`: [`soft_step`] or [`sharp_step`].
+/// Equations M3, M4 of docs/model.md.
 #[inline(always)]
 pub fn scatter_step<T: Real>(step: ScatterStep, r_minus_dist: T) -> T {
     match step {
@@ -101,6 +113,7 @@ pub fn scatter_step<T: Real>(step: ScatterStep, r_minus_dist: T) -> T {
 }
 
 /// [`scatter_step`] through [`Real::exp_fast`].
+/// Equations M3, M4 of docs/model.md.
 #[inline(always)]
 pub fn scatter_step_fast<T: Real>(step: ScatterStep, r_minus_dist: T) -> T {
     match step {
@@ -111,6 +124,7 @@ pub fn scatter_step_fast<T: Real>(step: ScatterStep, r_minus_dist: T) -> T {
 
 /// Derivative of [`scatter_step`] with respect to `r - dist`, from its value:
 /// `3 S (1 - S)` (paper) or `6 S (1 - S)` (sharp).
+/// Equations M3, M4 of docs/model.md.
 #[inline(always)]
 pub fn scatter_step_derivative<T: Real>(step: ScatterStep, s: T) -> T {
     match step {
@@ -122,6 +136,7 @@ pub fn scatter_step_derivative<T: Real>(step: ScatterStep, s: T) -> T {
 /// Area normalisation of a source of radius `r`: the paper's `A = r^2`, or for the sharp
 /// step its kernel's area `A = pi r^2 + 1/2` (the sum of `S` over the pixel grid: `pi r^2`
 /// for large r, 0.51 at `r = 0`, 1.16 at 0.5, 3.3 at 1, against 0.5, 1.29 and 3.64).
+/// Equation M7 of docs/model.md.
 #[inline(always)]
 pub fn source_area<T: Real>(step: ScatterStep, radius_px: T) -> T {
     match step {
@@ -131,6 +146,7 @@ pub fn source_area<T: Real>(step: ScatterStep, radius_px: T) -> T {
 }
 
 /// `dA/dr` of [`source_area`]: `2 r` or `2 pi r`.
+/// Equation M7 of docs/model.md.
 #[inline(always)]
 pub fn source_area_derivative<T: Real>(step: ScatterStep, radius_px: T) -> T {
     match step {
@@ -140,6 +156,7 @@ pub fn source_area_derivative<T: Real>(step: ScatterStep, radius_px: T) -> T {
 }
 
 /// `A'(r) / A(r)` of [`source_area`] (`2 / r` for the paper's `r^2`).
+/// Equation M7 of docs/model.md.
 #[inline(always)]
 pub fn source_area_log_derivative<T: Real>(step: ScatterStep, radius_px: T) -> T {
     source_area_derivative(step, radius_px) / source_area(step, radius_px)
@@ -147,6 +164,7 @@ pub fn source_area_log_derivative<T: Real>(step: ScatterStep, radius_px: T) -> T
 
 /// The derivative of the normalised scatter term with respect to the source radius,
 /// times the area: `A d(S/A)/dr = S' - S A'/A`, from `S`, `S' = dS/dr` and `A'/A`.
+/// Equation M23 of docs/model.md.
 #[inline(always)]
 pub fn normalised_scatter_radius_factor<T: Real>(s: T, ds_dr: T, dlog_area: T) -> T {
     ds_dr - s * dlog_area
@@ -154,6 +172,7 @@ pub fn normalised_scatter_radius_factor<T: Real>(s: T, ds_dr: T, dlog_area: T) -
 
 /// Radius of the in-focus footprint a kernel aperture is unioned with: the paper's 1, or
 /// half a pixel for the sharp step (the centre pixel only).
+/// Equation M6 of docs/model.md.
 #[inline(always)]
 pub fn kernel_footprint_radius_px<T: Real>(step: ScatterStep) -> T {
     match step {

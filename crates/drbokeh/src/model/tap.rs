@@ -12,6 +12,7 @@ use crate::aperture::{Aperture, KernelImage};
 use crate::Real;
 
 /// Window mask `M(x - y) = 1` iff `dist < R` (strict).
+/// Equation M8 of docs/model.md.
 #[inline(always)]
 pub fn in_window(dx: isize, dy: isize, window_radius_px: usize) -> bool {
     ((dx * dx + dy * dy) as f64).sqrt() < window_radius_px as f64
@@ -19,6 +20,7 @@ pub fn in_window(dx: isize, dy: isize, window_radius_px: usize) -> bool {
 
 /// Reflection padding index (mirror without repeating the edge pixel), folded as often as
 /// needed so that any offset maps into `0..n`.
+/// Equation M9 of docs/model.md.
 #[inline(always)]
 pub fn reflect(i: isize, n: usize) -> usize {
     if n == 1 {
@@ -30,6 +32,7 @@ pub fn reflect(i: isize, n: usize) -> usize {
 }
 
 /// The aperture prepared for evaluation in float type `T`.
+/// Equations M5, M6, M21 of docs/model.md.
 #[derive(Clone, Debug)]
 pub(crate) enum ApertureEval<T> {
     /// Circle and polygon: `S(r - gauge)`, the gauge precomputed per tap.
@@ -43,6 +46,7 @@ impl<T: Real> ApertureEval<T> {
     /// dropped tail ([`SCATTER_TAIL_PX`]): the polygon lies inside the
     /// circle (its gauge is at least the distance), and a kernel reaches the corner of its
     /// square, `sqrt(2) r`, plus one texel of bilinear support.
+    /// Equations M6, M21 of docs/model.md.
     pub(crate) fn reach_px(&self, radius_px: f64) -> f64 {
         let tail = SCATTER_TAIL_PX;
         match self {
@@ -55,6 +59,7 @@ impl<T: Real> ApertureEval<T> {
         }
     }
 
+    /// Prepares an aperture for evaluation (equations M5, M6 of docs/model.md).
     pub(crate) fn new(a: &Aperture) -> Self {
         match a {
             Aperture::Kernel(k) => ApertureEval::Kernel(k.clone(), std::marker::PhantomData),
@@ -67,6 +72,7 @@ impl<T: Real> ApertureEval<T> {
 /// `S(r - gauge)` for circle and polygon, the kernel image sampled at `(dx, dy) / r` and
 /// unioned with the in-focus footprint for a kernel aperture; with `DERIV`, also its
 /// derivative with respect to `r` (else 0).
+/// Equations M5, M6 of docs/model.md.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn scatter_term_and<T: Real, const DERIV: bool>(
@@ -109,6 +115,7 @@ pub(crate) fn scatter_term_and<T: Real, const DERIV: bool>(
 }
 
 /// The scatter term of a tap ([`scatter_term_and`] without the derivative).
+/// Equations M5, M6 of docs/model.md.
 #[inline(always)]
 pub(crate) fn scatter_term<T: Real>(
     step: ScatterStep,
@@ -123,6 +130,7 @@ pub(crate) fn scatter_term<T: Real>(
 }
 
 /// Tap weight `c(y,x) = a(y) M S(y,x) / A(y) O(y,x)` (M already applied by the caller).
+/// Equation M13 of docs/model.md.
 #[inline(always)]
 pub fn tap_weight<T: Real>(
     step: ScatterStep,
@@ -136,6 +144,7 @@ pub fn tap_weight<T: Real>(
 
 /// [`tap_weight`] with the source area's reciprocal precomputed:
 /// `c = a S (1/A) O` (the fast engine's form: one multiplication instead of a division).
+/// Equation M13 of docs/model.md.
 #[inline(always)]
 pub fn tap_weight_inv_area<T: Real>(alpha_y: T, scatter: T, inv_area_y: T, occlusion: T) -> T {
     alpha_y * scatter * inv_area_y * occlusion
@@ -144,6 +153,7 @@ pub fn tap_weight_inv_area<T: Real>(alpha_y: T, scatter: T, inv_area_y: T, occlu
 /// The tap weight of one masked tap, every term from the model: the scatter term under the
 /// aperture ([`scatter_term`]), the occlusion ([`occlusion`]; exactly 1 for the centre tap
 /// `(dx, dy) = (0, 0)` and where the receiver's focus weight is 0) and the source area.
+/// Equation M13 of docs/model.md.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn masked_tap_weight<T: Real>(
@@ -165,6 +175,7 @@ pub(crate) fn masked_tap_weight<T: Real>(
 }
 
 /// One window offset inside the mask, with its geometry precomputed.
+/// Equation M8 of docs/model.md.
 #[derive(Clone, Copy, Debug)]
 pub struct Tap {
     /// Horizontal offset `y - x` in pixels.
@@ -178,6 +189,7 @@ pub struct Tap {
 }
 
 /// All offsets of the `(2R+1)^2` window with `M = 1`, row-major.
+/// Equation M8 of docs/model.md.
 pub fn window_taps(window_radius_px: usize, aperture: &Aperture) -> Vec<Tap> {
     let r = window_radius_px as isize;
     let mut taps = Vec::new();

@@ -5,18 +5,21 @@ use super::options::Transfer;
 use crate::Real;
 
 /// Display encoding to linear: `lin = (I + offset)^g`.
+/// Equation M18 of docs/model.md.
 #[inline(always)]
 pub fn linearize<T: Real>(encoded: T, gamma: T, offset: T) -> T {
     (encoded + offset).powf(gamma)
 }
 
 /// Linear to display encoding: `out = lin^(1/g) - offset`.
+/// Equation M18 of docs/model.md.
 #[inline(always)]
 pub fn encode<T: Real>(linear: T, gamma: T, offset: T) -> T {
     linear.powf(T::one() / gamma) - offset
 }
 
 /// Derivative of [`encode`]: `(1/g) lin^(1/g - 1)`; 0 where `lin <= 0` (undefined there).
+/// Equation M18 of docs/model.md.
 #[inline(always)]
 pub fn encode_derivative<T: Real>(linear: T, gamma: T) -> T {
     if linear <= T::zero() {
@@ -25,10 +28,11 @@ pub fn encode_derivative<T: Real>(linear: T, gamma: T) -> T {
     linear.powf(T::one() / gamma - T::one()) / gamma
 }
 
-/// Exact sRGB decoding (IEC 61966-2-1; spec "Beyond the paper", preset `physical`) and its
+/// Exact sRGB decoding (IEC 61966-2-1; the `Srgb` transfer option) and its
 /// derivative `(lin, dlin/dI)`:
 /// `lin = I / 12.92` if `I <= 0.04045`, else `((I + 0.055) / 1.055)^2.4`;
 /// `dlin/dI = 1 / 12.92`, else `(2.4 / 1.055) ((I + 0.055) / 1.055)^1.4`.
+/// Equation M19 of docs/model.md.
 #[inline(always)]
 pub fn srgb_to_linear_with_derivative<T: Real>(encoded: T) -> (T, T) {
     if encoded <= T::c(0.04045) {
@@ -41,6 +45,7 @@ pub fn srgb_to_linear_with_derivative<T: Real>(encoded: T) -> (T, T) {
 
 /// Exact sRGB encoding, the inverse of [`srgb_to_linear_with_derivative`]:
 /// `I = 12.92 lin` if `lin <= 0.0031308`, else `1.055 lin^(1/2.4) - 0.055`.
+/// Equation M19 of docs/model.md.
 #[inline(always)]
 pub fn linear_to_srgb<T: Real>(linear: T) -> T {
     if linear <= T::c(0.0031308) {
@@ -51,6 +56,7 @@ pub fn linear_to_srgb<T: Real>(linear: T) -> T {
 }
 
 /// Derivative of [`linear_to_srgb`]: `12.92`, else `(1.055 / 2.4) lin^(1/2.4 - 1)`.
+/// Equation M19 of docs/model.md.
 #[inline(always)]
 pub fn linear_to_srgb_derivative<T: Real>(linear: T) -> T {
     if linear <= T::c(0.0031308) {
@@ -62,6 +68,7 @@ pub fn linear_to_srgb_derivative<T: Real>(linear: T) -> T {
 
 /// The display transfer of a render: the model option [`Transfer`] with the camera's gamma
 /// and offset (used by [`Transfer::Gamma`] only).
+/// Equations M18, M19 of docs/model.md.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tone {
     /// Which curve.
@@ -74,6 +81,7 @@ pub struct Tone {
 
 impl Tone {
     /// A transfer with the camera's gamma and offset.
+    /// Equations M18, M19 of docs/model.md.
     pub fn new(transfer: Transfer, gamma: f64, offset: f64) -> Self {
         Tone {
             transfer,
@@ -84,6 +92,7 @@ impl Tone {
 
     /// Display-encoded value to linear, and its derivative `dlin/dI`. For the gamma curve:
     /// [`linearize`] and `g (I + offset)^(g-1)` (0 where `I + offset <= 0`).
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn linearize_with_derivative<T: Real>(&self, encoded: T) -> (T, T) {
         match self.transfer {
@@ -103,6 +112,7 @@ impl Tone {
     }
 
     /// Display-encoded value to linear.
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn linearize<T: Real>(&self, encoded: T) -> T {
         match self.transfer {
@@ -112,6 +122,7 @@ impl Tone {
     }
 
     /// Linear to display encoding ([`encode`] or [`linear_to_srgb`]).
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn encode<T: Real>(&self, linear: T) -> T {
         match self.transfer {
@@ -121,6 +132,7 @@ impl Tone {
     }
 
     /// Derivative of [`Tone::encode`] ([`encode_derivative`] or [`linear_to_srgb_derivative`]).
+    /// Equations M18, M19 of docs/model.md.
     #[inline(always)]
     pub fn encode_derivative<T: Real>(&self, linear: T) -> T {
         match self.transfer {
@@ -136,6 +148,7 @@ impl Tone {
 /// Returns the linear colour of a source pixel with the optional highlight boost, and its partial
 /// derivatives `(lin, dlin/dI, dlin/dd)` with respect to the encoded value `I` and the
 /// relative disparity `d`. (`tanh < 1`, so only the lower clip can be active.)
+/// Equation M20 of docs/model.md.
 #[inline]
 pub fn source_linear_with_derivatives<T: Real>(
     encoded: T,
