@@ -197,7 +197,7 @@ impl<'a, T: Real> DiscGather<'a, T> {
                 (Some(_), left, right) => {
                     if let Some((lo, hi)) = left {
                         let mut c = hi - (lanes - 1);
-                        while c + lanes - 1 >= lo {
+                        while c + lanes > lo {
                             chunk(c);
                             c -= lanes;
                         }
