@@ -128,9 +128,11 @@ pub struct ExecArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
 
-    /// Execution engine. auto (default): fast in f32, threaded with --f64 (bit-exact, for
-    /// checks). fast: skips taps that cannot contribute (agrees with the reference to ~1e-6
-    /// in linear light) and has no practical window limit. threaded: every window tap, all
+    /// Execution engine. auto (default): in f32, per band and layer the span engine or the
+    /// fast engine's taps, whichever is predicted cheaper; threaded with --f64 (bit-exact,
+    /// for checks). spans: O(r) row spans (within ~2e-5 relative of fast). fast: skips taps
+    /// that cannot contribute (agrees with the reference to ~1e-6 in linear light) and has
+    /// no practical window limit. threaded: every window tap, all
     /// cores. reference: plain loops, the oracle (slow).
     #[arg(long, default_value = "auto", value_name = "ENGINE")]
     pub engine: String,
@@ -141,7 +143,8 @@ pub struct ExecArgs {
 }
 
 impl ExecArgs {
-    /// The engine to use: `auto` resolves to fast in f32 and threaded in f64.
+    /// The engine to use: `auto` is [`drbokeh::Engine::auto`] (spans or taps per band and
+    /// layer in f32, threaded in f64).
     pub fn engine(&self) -> Result<drbokeh::Engine> {
         Ok(drbokeh::Engine::parse_or_auto(&self.engine, self.f64)?)
     }

@@ -7,10 +7,13 @@ use drbokeh::bench::{
 };
 use std::path::PathBuf;
 
-/// Measure the engines on standard workloads (0.25 to 24 MP, K = 10/30/60, 1-3 layers, the
-/// demo, a uniformly blurred worst case, a 200-px blur): the fast engine against the plain
-/// multi-threaded engine (and the single-threaded reference on the demo), in one run.
-/// Prints time, taps visited, taps/s, speed-up and the largest difference in linear light.
+/// Measure the engines on standard workloads (0.25 to 24 MP, K = 10 to 100, 1-3 layers, the
+/// demo, a uniformly blurred worst case, 100- and 200-px blurs, the GEGL-equivalent workload
+/// of issue 18 with both presets, and a radius sweep 5..200 px of the span engine): the span
+/// engine (spans, and auto: spans or taps per band and layer) against the fast engine, the
+/// fast engine against the plain multi-threaded engine (and the single-threaded reference on
+/// the demo), in one run. Prints time, time per pixel and layer, work, speed-ups and the
+/// largest differences to the fast engine (display-encoded and in linear light).
 /// Then the adjoint at 512x512, 2 layers, K 30, L 71: fast forward, fast forward with tape,
 /// fast backward and backward/forward ratio; without --quick also the exact threaded
 /// adjoint (about a minute on 2 cores) and the largest gradient difference to it.
@@ -36,8 +39,9 @@ pub struct BenchArgs {
 }
 
 fn print_row(r: &BenchRow) {
+    let opt = |v: Option<f64>, f: &dyn Fn(f64) -> String| v.map(f).unwrap_or_else(|| "-".into());
     println!(
-        "| {} | {:.2} | {} | {} | {} | {} | {:.3} | {:.3e} | {:.3e} | {} | {} | {:.3e} |",
+        "| {} | {:.2} | {} | {} | {} | {} | {:.3} | {:.0} | {:.3e} | {} | {} | {} | {} | {} | {}/{} | {:.3e} |",
         r.workload,
         r.megapixels,
         r.layers,
@@ -45,14 +49,15 @@ fn print_row(r: &BenchRow) {
         r.window,
         r.engine,
         r.seconds,
+        r.ns_per_pixel_layer,
         r.taps as f64,
-        r.taps_per_second,
-        r.speedup_vs_threaded
-            .map(|s| format!("{s:.1}x"))
-            .unwrap_or_else(|| "-".into()),
-        r.max_linear_diff
-            .map(|d| format!("{d:.1e}"))
-            .unwrap_or_else(|| "-".into()),
+        opt(r.speedup_vs_fast, &|s| format!("{s:.2}x")),
+        opt(r.speedup_vs_threaded, &|s| format!("{s:.1}x")),
+        opt(r.max_display_diff, &|d| format!("{d:.1e}")),
+        opt(r.mean_display_diff, &|d| format!("{d:.1e}")),
+        opt(r.max_linear_diff, &|d| format!("{d:.1e}")),
+        r.span_layers,
+        r.tap_layers,
         r.disc_area,
     );
 }
@@ -94,8 +99,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     }
     crate::args::init_threads(a.threads)?;
     println!("threads: {}", rayon::current_num_threads());
-    println!("| workload | MP | layers | K | L | engine | seconds | taps | taps/s | speed-up vs threaded | max diff (linear) | disc area |");
-    println!("| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!("| workload | MP | layers | K | L | engine | seconds | ns/px/layer | taps (spans: work) | speed-up vs fast | vs threaded | max diff vs fast (display) | mean diff (display) | max diff (linear) | band-layers spans/taps | disc area |");
+    println!("| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
     let mut rows = Vec::new();
     for w in workloads_where(a.quick, matches) {
         rows.extend(run_workload(&w, &mut print_row)?);

@@ -1,6 +1,9 @@
-//! Standard performance workloads (`drbokeh bench`): the fast engine against the plain
-//! multi-threaded engine (and the single-threaded reference where affordable), measured in
-//! one run, with taps visited, throughput and the largest difference in linear light.
+//! Standard performance workloads (`drbokeh bench`): each workload's engines measured in one
+//! run (the span engine and its automatic choice against the fast engine, the fast engine
+//! against the plain multi-threaded engine and the single-threaded reference where
+//! affordable), with taps visited, throughput, time per pixel and the largest differences to
+//! the fast engine (linear light and display-encoded); the GEGL-equivalent workload
+//! ([`gegl_scene`]) and a radius sweep of the span engine.
 
 use crate::camera::WindowCap;
 use crate::demo;
@@ -8,7 +11,7 @@ use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
 use crate::model;
-use crate::presets::RenderSettings;
+use crate::presets::{Preset, RenderSettings};
 use crate::stack::{Layer, LayerStack};
 use crate::{Result, Window};
 use std::time::Instant;
@@ -21,8 +24,9 @@ pub struct Workload {
     pub stack: LayerStack<f32>,
     /// Settings (window fixed, so engines are compared on the same model).
     pub settings: RenderSettings,
-    /// Which comparison engines are affordable here.
-    pub compare: Vec<Engine>,
+    /// The engines measured, in order; differences and speed-ups are measured against the
+    /// fast engine's row when it is among them.
+    pub engines: Vec<Engine>,
 }
 
 /// One measured row.
@@ -48,8 +52,20 @@ pub struct BenchRow {
     pub taps_per_second: f64,
     /// Time of the threaded engine divided by this engine's (same run), if measured.
     pub speedup_vs_threaded: Option<f64>,
-    /// Largest absolute difference to the comparison engine, in linear light, if measured.
+    /// Largest absolute difference to the fast engine, in linear light, if measured.
     pub max_linear_diff: Option<f64>,
+    /// Largest absolute difference to the fast engine, display-encoded, if measured.
+    pub max_display_diff: Option<f64>,
+    /// Mean absolute difference to the fast engine, display-encoded, if measured.
+    pub mean_display_diff: Option<f64>,
+    /// Time of the fast engine divided by this engine's (same run), if measured.
+    pub speedup_vs_fast: Option<f64>,
+    /// Wall nanoseconds per pixel and layer.
+    pub ns_per_pixel_layer: f64,
+    /// Span engine: band-layers rendered as spans and on the tap path.
+    pub span_layers: u64,
+    /// Span engine: band-layers rendered on the tap path.
+    pub tap_layers: u64,
     /// Summed area of the blur discs, `sum over pixels with alpha > 0 of pi (r + SCATTER_TAIL_PX)^2`:
     /// the work a radius-bounded engine must do.
     pub disc_area: f64,
@@ -95,6 +111,98 @@ fn settings(focus: f64, k: f64, window: Window) -> RenderSettings {
     s
 }
 
+/// A deterministic xorshift generator for the synthetic workloads.
+struct XorShift(u64);
+
+impl XorShift {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// The GEGL-equivalent workload (issue 18): a photo-like image (colour gradients, hard-edged
+/// shapes, small bright highlights) and a blur radius map ramping from 3 px at the top-left
+/// corner to 33 px at the bottom-right, `r = 3 + 30 (x / (W-1) + y / (H-1)) / 2` (mean disc
+/// `pi E[r^2]` about 1140 px^2 on any size). Returns the display-encoded RGB image and the
+/// radius map in pixels.
+pub fn gegl_scene(width: usize, height: usize) -> (Image<f32>, Image<f32>) {
+    let mut rgb = Image::<f32>::new(width, height, 3);
+    let mut radius = Image::<f32>::new(width, height, 1);
+    let mut rng = XorShift(0x9e37_79b9_7f4a_7c15);
+    let (fw, fh) = (width.max(2) as f64 - 1.0, height.max(2) as f64 - 1.0);
+    for y in 0..height {
+        for x in 0..width {
+            let (u, v) = (x as f64 / fw, y as f64 / fh);
+            let base = [
+                0.25 + 0.5 * u,
+                0.3 + 0.4 * (6.0 * v).sin().abs(),
+                0.6 - 0.4 * u * v,
+            ];
+            // Hard-edged blocks every 96 px.
+            let block = ((x / 96 + y / 96) % 3) as f64 * 0.15;
+            for c in 0..3 {
+                *rgb.at_mut(x, y, c) = (base[c] * (0.7 + block)).min(1.0) as f32;
+            }
+            *radius.at_mut(x, y, 0) = (3.0 + 30.0 * (u + v) / 2.0) as f32;
+        }
+    }
+    // Highlights: one small bright disc per 4000 pixels.
+    for _ in 0..(width * height / 4000).max(1) {
+        let (cx, cy) = (rng.next() * width as f64, rng.next() * height as f64);
+        let rad = 1.0 + 2.0 * rng.next();
+        let (x0, x1) = (
+            (cx - rad).max(0.0) as usize,
+            ((cx + rad) as usize + 1).min(width),
+        );
+        let (y0, y1) = (
+            (cy - rad).max(0.0) as usize,
+            ((cy + rad) as usize + 1).min(height),
+        );
+        for y in y0..y1 {
+            for x in x0..x1 {
+                if (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2) <= rad * rad {
+                    for c in 0..3 {
+                        *rgb.at_mut(x, y, c) = 1.0;
+                    }
+                }
+            }
+        }
+    }
+    (rgb, radius)
+}
+
+/// Blur strength of the GEGL-equivalent workload: focus 0 and disparity `r / 33`, so that
+/// the physical preset's radius `K |d|` is the radius map (the paper's adds its 1 px
+/// footprint).
+pub const GEGL_BLUR_K: f64 = 33.0;
+
+/// The GEGL-equivalent workload as a single opaque layer (disparity `r / 33`) and its
+/// settings (focus 0, K 33, window just large enough).
+pub fn gegl_workload(
+    width: usize,
+    height: usize,
+    preset: Preset,
+) -> (LayerStack<f32>, RenderSettings) {
+    let (rgb, radius) = gegl_scene(width, height);
+    let disparity = Image::from_vec(
+        width,
+        height,
+        1,
+        radius.data.iter().map(|r| r / GEGL_BLUR_K as f32).collect(),
+    )
+    .expect("same size");
+    let stack = LayerStack::single(rgb, disparity).expect("valid stack");
+    let mut s = settings(0.0, GEGL_BLUR_K, Window::auto_unclipped(GEGL_BLUR_K + 1.0));
+    s.preset = preset;
+    (stack, s)
+}
+
+/// The radii of the span engine's radius sweep, in pixels.
+pub const SWEEP_RADII_PX: [f64; 6] = [5.0, 10.0, 25.0, 50.0, 100.0, 200.0];
+
 /// The standard workloads; `quick` keeps only the small ones.
 pub fn workloads(quick: bool) -> Vec<Workload> {
     workloads_where(quick, |_| true)
@@ -106,17 +214,19 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
     let l71 = Window::from_size(71).unwrap();
     let mut w = Vec::new();
     let mut add =
-        |name: &str, make: &dyn Fn() -> (LayerStack<f32>, RenderSettings), compare: Vec<Engine>| {
+        |name: &str, make: &dyn Fn() -> (LayerStack<f32>, RenderSettings), engines: Vec<Engine>| {
             if keep(name) {
                 let (stack, settings) = make();
                 w.push(Workload {
                     name: name.into(),
                     stack,
                     settings,
-                    compare,
+                    engines,
                 })
             }
         };
+    let spans_fast = || vec![Engine::Fast, Engine::Auto, Engine::Spans];
+    let with_threaded = || vec![Engine::Fast, Engine::Auto, Engine::Spans, Engine::Threaded];
     add(
         "demo-3L-K30",
         &|| {
@@ -128,19 +238,25 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
             );
             (demo_stack, settings(demo::DEMO_FOCUS, 30.0, demo_window))
         },
-        vec![Engine::Threaded, Engine::Reference],
+        vec![
+            Engine::Fast,
+            Engine::Auto,
+            Engine::Spans,
+            Engine::Threaded,
+            Engine::Reference,
+        ],
     );
     for k in [10.0, 30.0, 60.0] {
         add(
             &format!("0.25MP-2L-K{k}"),
             &|| (two_layer(512, 512), settings(0.5, k, l71)),
-            vec![Engine::Threaded],
+            with_threaded(),
         );
     }
     add(
         "0.25MP-1L-uniform-K30",
         &|| (uniform_blur(512, 512), settings(0.5, 30.0, l71)),
-        vec![Engine::Threaded],
+        with_threaded(),
     );
     add(
         "0.25MP-3L-K30",
@@ -158,7 +274,7 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
             }
             (three, settings(0.5, 30.0, l71))
         },
-        vec![Engine::Threaded],
+        with_threaded(),
     );
     // Large blur with no window limit: radius 101 px (and 201 px in the full run).
     add(
@@ -173,28 +289,73 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
                 ),
             )
         },
-        vec![],
+        spans_fast(),
     );
+    // The GEGL-equivalent workload (issue 18), both presets.
+    let gegl_size = if quick { 512 } else { 1024 };
+    for preset in [Preset::Physical, Preset::Paper] {
+        add(
+            &format!(
+                "gegl-{}MP-1L-r3..33-{}",
+                if quick { "0.25" } else { "1" },
+                preset.name()
+            ),
+            &|| gegl_workload(gegl_size, gegl_size, preset),
+            spans_fast(),
+        );
+    }
+    // Radius sweep of the span engine: one opaque layer blurred uniformly, preset physical
+    // (radius K |d| exactly); the fast engine where affordable.
+    let sweep_size = if quick { 256 } else { 512 };
+    for r in SWEEP_RADII_PX {
+        let fast_affordable = r <= if quick { 10.0 } else { 25.0 };
+        add(
+            &format!("sweep-{sweep_size}px-1L-r{r}"),
+            &|| {
+                let mut s = settings(0.5, 2.0 * r, Window::auto_unclipped(r));
+                s.preset = Preset::Physical;
+                (uniform_blur(sweep_size, sweep_size), s)
+            },
+            if fast_affordable {
+                vec![Engine::Fast, Engine::Spans]
+            } else {
+                vec![Engine::Spans]
+            },
+        );
+        if quick && r >= 50.0 {
+            break;
+        }
+    }
     if !quick {
         add(
             "1MP-2L-K30-L71 (paper defaults)",
             &|| (two_layer(1024, 1024), settings(0.5, 30.0, l71)),
-            vec![Engine::Threaded],
+            with_threaded(),
         );
         add(
             "1MP-1L-uniform-K30",
             &|| (uniform_blur(1024, 1024), settings(0.5, 30.0, l71)),
-            vec![],
+            spans_fast(),
         );
         add(
             "4MP-2L-K30",
             &|| (two_layer(2048, 2048), settings(0.5, 30.0, l71)),
-            vec![],
+            spans_fast(),
         );
         add(
             "24MP-2L-K30",
             &|| (two_layer(6000, 4000), settings(0.5, 30.0, l71)),
-            vec![],
+            spans_fast(),
+        );
+        // 24 MP at K 100: radii to 51 px (front) and 41 px (background), no window limit.
+        add(
+            "24MP-2L-K100",
+            &|| {
+                let stack = two_layer(6000, 4000);
+                let window = Window::auto_unclipped(100.0 * stack.max_defocus(0.5) + 1.0);
+                (stack, settings(0.5, 100.0, window))
+            },
+            vec![Engine::Auto, Engine::Spans],
         );
         add(
             "0.07MP-1L-radius200",
@@ -208,7 +369,7 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
                     ),
                 )
             },
-            vec![],
+            spans_fast(),
         );
     }
     w
@@ -244,46 +405,71 @@ fn disc_area(stack: &LayerStack<f32>, s: &RenderSettings) -> f64 {
         .sum()
 }
 
-fn max_linear_diff(a: &Image<f32>, b: &Image<f32>, gamma: f64) -> f64 {
-    a.data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| ((*x as f64).powf(gamma) - (*y as f64).powf(gamma)).abs())
-        .fold(0.0, f64::max)
+/// `(max linear, max display, mean display)` absolute differences of two renders.
+fn differences(a: &Image<f32>, b: &Image<f32>, s: &RenderSettings) -> (f64, f64, f64) {
+    let tone = s.tone();
+    let (mut lin, mut max, mut sum) = (0.0f64, 0.0f64, 0.0f64);
+    for (x, y) in a.data.iter().zip(&b.data) {
+        let (x, y) = (*x as f64, *y as f64);
+        lin = lin.max((tone.linearize(x) - tone.linearize(y)).abs());
+        max = max.max((x - y).abs());
+        sum += (x - y).abs();
+    }
+    (lin, max, sum / a.data.len().max(1) as f64)
 }
 
-/// Runs one workload: the fast engine, then each comparison engine. `report` sees each row.
+/// Runs one workload: each of its engines in order. `report` sees each row.
 pub fn run_workload(w: &Workload, report: &mut dyn FnMut(&BenchRow)) -> Result<Vec<BenchRow>> {
     let mp = (w.stack.width * w.stack.height) as f64 / 1e6;
     let area = disc_area(&w.stack, &w.settings);
-    let row = |engine: Engine, seconds: f64, taps: u64| BenchRow {
-        workload: w.name.clone(),
-        megapixels: mp,
-        layers: w.stack.layers.len(),
-        blur_k: w.settings.camera.blur_k,
-        window: w.settings.camera.window.size(),
-        engine: format!("{engine:?}").to_lowercase(),
-        seconds,
-        taps,
-        taps_per_second: taps as f64 / seconds,
-        speedup_vs_threaded: None,
-        max_linear_diff: None,
-        disc_area: area,
-    };
-    let t = Instant::now();
-    let (fast, stats) = render_with_stats(&w.stack, &w.settings, Engine::Fast, &NoProgress)?;
-    let mut rows = vec![row(Engine::Fast, t.elapsed().as_secs_f64(), stats.taps)];
-    for &engine in &w.compare {
+    let pixel_layers = (w.stack.width * w.stack.height * w.stack.layers.len()) as f64;
+    let mut rows: Vec<BenchRow> = Vec::new();
+    let mut fast: Option<(Image<f32>, f64)> = None;
+    let mut threaded_seconds = None;
+    for &engine in &w.engines {
         let t = Instant::now();
         let (img, stats) = render_with_stats(&w.stack, &w.settings, engine, &NoProgress)?;
-        let mut r = row(engine, t.elapsed().as_secs_f64(), stats.taps);
-        let diff = max_linear_diff(&img, &fast, w.settings.camera.gamma);
-        r.max_linear_diff = Some(diff);
-        rows[0].max_linear_diff = Some(rows[0].max_linear_diff.unwrap_or(0.0).max(diff));
+        let seconds = t.elapsed().as_secs_f64();
+        let mut row = BenchRow {
+            workload: w.name.clone(),
+            megapixels: mp,
+            layers: w.stack.layers.len(),
+            blur_k: w.settings.camera.blur_k,
+            window: w.settings.camera.window.size(),
+            engine: format!("{engine:?}").to_lowercase(),
+            seconds,
+            taps: stats.taps,
+            taps_per_second: stats.taps as f64 / seconds,
+            speedup_vs_threaded: None,
+            max_linear_diff: None,
+            max_display_diff: None,
+            mean_display_diff: None,
+            speedup_vs_fast: None,
+            ns_per_pixel_layer: seconds * 1e9 / pixel_layers,
+            span_layers: stats.span_layers,
+            tap_layers: stats.tap_layers,
+            disc_area: area,
+        };
         if engine == Engine::Threaded {
-            rows[0].speedup_vs_threaded = Some(r.seconds / rows[0].seconds);
+            threaded_seconds = Some(seconds);
         }
-        rows.push(r);
+        match &fast {
+            None if engine == Engine::Fast => fast = Some((img, seconds)),
+            Some((f, fast_seconds)) => {
+                let (lin, max, mean) = differences(&img, f, &w.settings);
+                row.max_linear_diff = Some(lin);
+                row.max_display_diff = Some(max);
+                row.mean_display_diff = Some(mean);
+                row.speedup_vs_fast = Some(fast_seconds / seconds);
+            }
+            None => {}
+        }
+        rows.push(row);
+    }
+    if let Some(t) = threaded_seconds {
+        for r in &mut rows {
+            r.speedup_vs_threaded = Some(t / r.seconds);
+        }
     }
     rows.iter().for_each(report);
     Ok(rows)
@@ -321,7 +507,7 @@ pub fn adjoint_workload() -> Workload {
         name: ADJOINT_WORKLOAD_NAME.into(),
         stack: two_layer(512, 512),
         settings: settings(0.5, 30.0, Window::from_size(71).expect("valid window")),
-        compare: vec![Engine::Threaded],
+        engines: vec![Engine::Fast, Engine::Threaded],
     }
 }
 

@@ -252,7 +252,7 @@ impl View {
             }
             None => {
                 let needed = model::largest_scatter_radius_px(self.blur_k, max_defocus(focus));
-                let cap = if engine == Engine::Fast {
+                let cap = if matches!(engine, Engine::Fast | Engine::Spans | Engine::Auto) {
                     WindowCap::Unclipped
                 } else {
                     WindowCap::Clipped
@@ -299,7 +299,8 @@ pub struct Scene<T> {
 
 /// Turns what the user gave into a stack, settings and notes (see the module
 /// documentation for the policy). `engine` is the engine that will render: the automatic
-/// window is not capped for [`Engine::Fast`].
+/// window is not capped for the radius-bounded engines ([`Engine::Fast`], [`Engine::Spans`],
+/// [`Engine::Auto`]).
 pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Result<Scene<T>> {
     let demo_view;
     let view = match (&source, view.focus) {

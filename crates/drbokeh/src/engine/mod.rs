@@ -7,6 +7,7 @@
 //! | [`Engine::Reference`] | `reference.rs` (plain loops) | the threaded adjoint |
 //! | [`Engine::Threaded`] | `threaded/forward.rs` | `threaded/adjoint.rs` (exact, every window tap) |
 //! | [`Engine::Fast`] | `fast/forward.rs` (bands, tiles, reach, lanes) | `fast/adjoint/` (same schedule) |
+//! | [`Engine::Spans`], [`Engine::Auto`] | `spans/` (row spans, per band-layer choice of spans or the fast taps) | the fast adjoint (no span adjoint yet) |
 //!
 //! Shared by the schedules: `planes.rs` (the padded struct-of-arrays planes), `tape.rs`
 //! (what the forward records, the gradients), `backward.rs` (the chain rule around each
@@ -19,6 +20,7 @@ mod planes;
 mod reference;
 mod schedule;
 pub mod simd;
+mod spans;
 mod tape;
 mod threaded;
 
@@ -36,8 +38,13 @@ use crate::{Real, Result};
 pub struct RenderStats {
     /// Source-receiver pairs visited: every masked window tap of every pixel and layer for
     /// the reference and threaded engines, the taps inside each tile's reach for the fast
-    /// engine.
+    /// engine; for the span engine, its tap path's taps plus its span path's work (ring
+    /// taps and span writes).
     pub taps: u64,
+    /// Span engine: band-layers rendered as spans.
+    pub span_layers: u64,
+    /// Span engine: band-layers rendered on the tap path.
+    pub tap_layers: u64,
 }
 
 /// Renders a layer stack: returns the display-encoded RGB image (3 channels).
@@ -70,17 +77,41 @@ pub fn render_with_stats<T: Real>(
             reference::render(stack, settings, progress),
             RenderStats {
                 taps: window_taps(),
+                ..RenderStats::default()
             },
         ),
         Engine::Threaded => (
             threaded::forward::render(stack, settings, progress),
             RenderStats {
                 taps: window_taps(),
+                ..RenderStats::default()
             },
         ),
         Engine::Fast => {
             let (img, taps) = fast::forward::render(stack, settings, progress);
-            (img, RenderStats { taps })
+            (
+                img,
+                RenderStats {
+                    taps,
+                    ..RenderStats::default()
+                },
+            )
+        }
+        Engine::Spans | Engine::Auto => {
+            let choice = if engine == Engine::Spans {
+                spans::Choice::Spans
+            } else {
+                spans::Choice::Auto
+            };
+            let (img, s) = spans::render(stack, settings, progress, choice);
+            (
+                img,
+                RenderStats {
+                    taps: s.taps + s.span_work,
+                    span_layers: s.span_layers,
+                    tap_layers: s.tap_layers,
+                },
+            )
         }
     })
 }
@@ -104,6 +135,9 @@ pub fn render_with_tape<T: Real>(
 ///   the blur radii that reach them, the soft step's tail beyond `r + 4.5` px dropped; see
 ///   `engine/fast/adjoint/`); the output is `render(.., Engine::Fast, ..)`, bit for bit,
 ///   and the gradients agree with the exact adjoint to about 1e-6 of their largest value.
+/// - [`Engine::Spans`] and [`Engine::Auto`]: no span-structured adjoint yet; the tape is the
+///   fast engine's (output `render(.., Engine::Fast, ..)`, within the span engine's bounds of
+///   `render(.., Engine::Spans, ..)`), and [`Tape::engine`] says [`Engine::Fast`].
 pub fn render_with_tape_on<T: Real>(
     stack: &LayerStack<T>,
     settings: &RenderSettings,
@@ -118,7 +152,7 @@ pub fn render_with_tape_on<T: Real>(
             let (img, tape) = threaded::forward::render_with_tape(stack, settings, progress);
             (img, Tape::new(settings, Engine::Threaded, Box::new(tape)))
         }
-        Engine::Fast => {
+        Engine::Fast | Engine::Spans | Engine::Auto => {
             let (img, tape) = fast::adjoint::render_with_tape(stack, settings, progress);
             (img, Tape::new(settings, Engine::Fast, Box::new(tape)))
         }

@@ -13,21 +13,28 @@ pub enum Engine {
     /// Bands, tiles bounded by the largest blur that reaches them, vectorised f32 inner
     /// loops; agrees with the reference to ~1e-6 in linear light.
     Fast,
+    /// Row spans: O(r) per source instead of the fast engine's O(r^2) taps, with bounded
+    /// approximations (relative errors of at most a few 1e-5; `engine/spans/`); the tap
+    /// path where spans are not bounded (kernel apertures, wide in-focus disparity ranges).
+    Spans,
+    /// Per band and layer, spans or the fast engine's taps, whichever is predicted cheaper.
+    Auto,
 }
 
 impl Engine {
-    /// The default schedule: [`Engine::Fast`] in single precision, [`Engine::Threaded`] in
-    /// double precision (every window tap: the equation and its gradient exactly, for
-    /// checks).
+    /// The default schedule: [`Engine::Auto`] in single precision (spans or the fast
+    /// engine's taps per band and layer, whichever is predicted cheaper; its tape is the fast
+    /// adjoint's), [`Engine::Threaded`] in double precision (every window tap: the equation
+    /// and its gradient exactly, for checks).
     pub fn auto(double_precision: bool) -> Engine {
         if double_precision {
             Engine::Threaded
         } else {
-            Engine::Fast
+            Engine::Auto
         }
     }
 
-    /// Parses `fast`, `threaded`, `reference`, or `auto` ([`Engine::auto`] for the
+    /// Parses `spans`, `fast`, `threaded`, `reference`, or `auto` ([`Engine::auto`] for the
     /// precision).
     pub fn parse_or_auto(name: &str, double_precision: bool) -> Result<Engine> {
         match name {
@@ -44,9 +51,11 @@ impl std::str::FromStr for Engine {
             "reference" => Ok(Engine::Reference),
             "threaded" => Ok(Engine::Threaded),
             "fast" => Ok(Engine::Fast),
+            "spans" => Ok(Engine::Spans),
+            "auto" => Ok(Engine::Auto),
             _ => Err(Error::param(
                 "engine",
-                format!("unknown engine '{s}' (available: fast, threaded, reference)"),
+                format!("unknown engine '{s}' (available: auto, spans, fast, threaded, reference)"),
             )),
         }
     }
@@ -57,8 +66,8 @@ mod tests {
     use super::Engine;
 
     #[test]
-    fn auto_is_fast_in_f32_and_threaded_in_f64() {
-        assert_eq!(Engine::parse_or_auto("auto", false).unwrap(), Engine::Fast);
+    fn auto_is_spans_or_taps_in_f32_and_threaded_in_f64() {
+        assert_eq!(Engine::parse_or_auto("auto", false).unwrap(), Engine::Auto);
         assert_eq!(
             Engine::parse_or_auto("auto", true).unwrap(),
             Engine::Threaded

@@ -116,14 +116,14 @@ pub(super) fn render_recording<T: Real>(
 }
 
 /// Summed-area table (f64) of a band's padded alpha, `(rows + 1) x (stride + 1)`: the
-/// paper's box coverage in O(1) per receiver.
-struct AlphaSat {
+/// paper's box coverage in O(1) per receiver (also the span engine's).
+pub(in crate::engine) struct AlphaSat {
     stride: usize,
     sat: Vec<f64>,
 }
 
 impl AlphaSat {
-    fn new<T: Real>(b: &Planes<T>) -> Self {
+    pub(in crate::engine) fn new<T: Real>(b: &Planes<T>) -> Self {
         let s1 = b.stride + 1;
         let mut sat = vec![0.0; (b.rows + 1) * s1];
         for py in 0..b.rows {
@@ -146,6 +146,47 @@ impl AlphaSat {
         self.sat[r1 * s1 + c1] - self.sat[r0 * s1 + c1] - self.sat[r1 * s1 + c0]
             + self.sat[r0 * s1 + c0]
     }
+
+    /// The paper's box coverage of receiver `(x, y)` of the band planes `b`: the mean of
+    /// alpha over the square of half-size [`model::coverage_half_size_px`].
+    #[inline(always)]
+    pub(in crate::engine) fn box_coverage<T: Real>(
+        &self,
+        b: &Planes<T>,
+        x: usize,
+        y: usize,
+        big_r: usize,
+    ) -> T {
+        let half = model::coverage_half_size_px(b.radius[b.index(x, y)], big_r);
+        let (r0, c0) = (y + big_r - half, x + big_r - half);
+        let n = (2 * half + 1) as f64;
+        T::c(self.sum(r0, r0 + 2 * half + 1, c0, c0 + 2 * half + 1) / (n * n))
+    }
+}
+
+/// One layer over one band on the fast schedule (the span engine's tap path): gathers it
+/// and composites it into `linear` and `transmittance` (front to back). Returns the taps
+/// visited.
+#[allow(clippy::too_many_arguments)]
+pub(in crate::engine) fn band_layer_taps<T: Real>(
+    b: &Planes<T>,
+    settings: &RenderSettings,
+    tables: &WindowTables<T>,
+    aperture: &ApertureEval<T>,
+    size: (usize, usize),
+    linear: &mut [[T; 3]],
+    transmittance: &mut [T],
+) -> u64 {
+    render_band_layer_dispatch(
+        b,
+        settings,
+        tables,
+        aperture,
+        size,
+        linear,
+        transmittance,
+        &mut [],
+    )
 }
 
 avx2_dispatch!(
@@ -263,13 +304,10 @@ fn render_band_layer<T: Real>(
                 }
                 let inv = T::one() / (weight + eps);
                 let coverage = match coverage_kind {
-                    Coverage::PaperBox => {
-                        let half = model::coverage_half_size_px(b.radius[xi], big_r);
-                        let (r0, c0) = (y + big_r - half, x + big_r - half);
-                        let n = (2 * half + 1) as f64;
-                        let sat = alpha_sat.as_ref().expect("built for the box coverage");
-                        T::c(sat.sum(r0, r0 + 2 * half + 1, c0, c0 + 2 * half + 1) / (n * n))
-                    }
+                    Coverage::PaperBox => alpha_sat
+                        .as_ref()
+                        .expect("built for the box coverage")
+                        .box_coverage(b, x, y, big_r),
                     // No source with alpha > 0 in the window: o = 0 exactly.
                     Coverage::SoftDisc if widths.is_empty() => T::zero(),
                     Coverage::SoftDisc => {

@@ -33,4 +33,4 @@
 pub(super) mod adjoint;
 pub(super) mod forward;
 mod runs;
-mod tiles;
+pub(super) mod tiles;

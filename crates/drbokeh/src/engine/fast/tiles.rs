@@ -32,7 +32,7 @@ pub(super) fn backward_reach<T: Real>(aperture: &ApertureEval<T>, r: f64) -> f64
 }
 
 /// Per-window tables: for each row `dy`, the gauge and distance of every `dx` (`-R..=R`).
-pub(super) struct WindowTables<T> {
+pub(in crate::engine) struct WindowTables<T> {
     pub big_r: usize,
     pub gauge: Vec<Vec<T>>,
     pub dist: Vec<Vec<f64>>,
@@ -122,7 +122,7 @@ impl<T: Real> WindowTables<T> {
 
 /// Per block of [`ROW_BLOCK`] padded rows and per padded column, the largest source radius
 /// among the pixels that `keep` (`-inf` where none does).
-pub(super) fn source_block_max<T: Real>(
+pub(in crate::engine) fn source_block_max<T: Real>(
     src: &Planes<T>,
     keep: impl Fn(usize) -> bool + Sync,
 ) -> Vec<f64> {
@@ -148,7 +148,7 @@ pub(super) fn source_block_max<T: Real>(
 /// The largest radius in `block_max` ([`source_block_max`]) over the window of the
 /// receivers in columns `x0..x1` and rows `y0..y1` (padded coordinates: receiver (x, y)
 /// sits at (x + R, y + R); its window spans x .. x + 2R, y .. y + 2R); `-inf` if none.
-pub(super) fn tile_max_radius(
+pub(in crate::engine) fn tile_max_radius(
     block_max: &[f64],
     stride: usize,
     big_r: usize,

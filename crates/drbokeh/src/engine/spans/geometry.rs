@@ -1,0 +1,422 @@
+//! The span engine's geometry: where a disc's soft step is flat (its interior, summed as
+//! spans) and where it is not (its ring, evaluated tap by tap), row by row, for circle and
+//! polygon apertures; and the padded gauge tables the ring reads.
+//!
+//! A source of radius `r` weighs `S(r - g)` at a receiver whose tap offset has gauge `g`
+//! (the distance for the circle). Per receiver row the set `{g <= c}` is one interval of
+//! columns (the gauge is convex), so a disc row splits into
+//! - the **interior** `g <= r - u_in`, where `S` is replaced by 1 ([`Rings::inner_px`]);
+//! - the **ring** `r - u_in < g <= r + u_out` (at most two runs), evaluated exactly;
+//! - the **tail** `g > r + u_out`, dropped ([`Rings::outer_px`]).
+
+use crate::aperture::Aperture;
+use crate::model::{self, ScatterStep};
+use crate::Real;
+
+/// The relative weight error allowed per interior tap: `1 - S <= INTERIOR_DEFECT` wherever
+/// the span engine takes `S = 1`.
+pub const INTERIOR_DEFECT: f64 = 1e-5;
+
+/// Lanes of a ring chunk: receivers evaluated together (one AVX2 register of f32).
+pub const LANES: usize = 8;
+
+/// Columns of margin on each side of the row accumulators: a ring chunk is extended
+/// outwards to [`LANES`] taps, so it reaches at most `LANES - 1` columns beyond its run.
+pub const MARGIN: usize = LANES;
+
+/// Columns of margin on each side of the gauge tables: a circle's ring profile is
+/// evaluated in whole chunks from the run's inner end to `LANES - 1` columns beyond its
+/// outer end, so up to `2 LANES - 2` columns beyond the window.
+pub const TABLE_MARGIN: usize = 2 * LANES;
+
+/// Ring chunks are extended outwards (away from the interior), so they evaluate some taps
+/// beyond `r + u_out`; their argument `r - g` is clamped at this value, where the step is
+/// below `5.4e-32` (sharp) or `2.3e-17` (paper) and stays a normal f32 (no denormal
+/// stalls). Unclamped taps beyond `r + u_out` are exact model values.
+pub const STEP_ARGUMENT_MIN: f64 = -12.0;
+
+/// The widths of a disc's ring for one scatter step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rings {
+    /// `u_in`: where `r - g >= u_in`, `1 - S <= INTERIOR_DEFECT`.
+    pub inner_px: f64,
+    /// `u_out`: where `r - g < -u_out`, the tap is dropped.
+    pub outer_px: f64,
+}
+
+impl Rings {
+    /// The ring widths of `step`.
+    ///
+    /// - Interior. Paper: `1 - S = 10 e^{-3u} / (1 + 10 e^{-3u}) <= 10 e^{-3u}`, so
+    ///   `u_in = ln(10 / 1e-5) / 3 = 4.61` px; sharp: `1 - S = 1 / (1 + e^{6u}) <= e^{-6u}`,
+    ///   `u_in = ln(1e5) / 6 = 1.92` px. Every interior weight is overestimated by a factor
+    ///   in `[1, 1 / (1 - 1e-5)]`, so `C`, `W`, the soft-disc sums and hence `B`, `o` and
+    ///   `1 - o` (weighted means of non-negative values) carry relative errors of at most
+    ///   `2e-5`.
+    /// - Tail. Paper: the render's own [`model::SCATTER_TAIL_PX`] (4.5 px, `S <= 1.4e-7`),
+    ///   so every tap the fast engine keeps for a source alone is kept; sharp: 2.75 px,
+    ///   where `S <= e^{-16.5} = 6.8e-8`, a smaller per-tap weight than the paper's tail
+    ///   (the fast engine keeps the sharp step out to 4.5 px, where `S <= 2e-12`; the
+    ///   difference is at most `(2 pi (r + 3) / 6) e^{-16.5} / (pi r^2 + 1/2)` of a
+    ///   source's weight: below `1e-7` for every `r`).
+    pub fn of(step: ScatterStep) -> Self {
+        match step {
+            ScatterStep::Paper => Rings {
+                inner_px: (10.0 / INTERIOR_DEFECT).ln() / 3.0,
+                outer_px: model::SCATTER_TAIL_PX,
+            },
+            ScatterStep::Sharp => Rings {
+                inner_px: (1.0 / INTERIOR_DEFECT).ln() / 6.0,
+                outer_px: 2.75,
+            },
+        }
+    }
+}
+
+/// A convex aperture's row intervals: for a gauge bound `c` and a row offset, the columns
+/// whose gauge is at most `c`.
+#[derive(Clone, Debug)]
+pub enum Shape {
+    /// `g = |v|`.
+    Circle,
+    /// `g(v) = max_k (n_k . v) / cos(pi / n)` over the edge normals `n_k`.
+    Polygon {
+        /// `(cos a_k, sin a_k)` of each edge normal.
+        normals: Vec<(f64, f64)>,
+        /// The apothem of the unit polygon, `cos(pi / n)`.
+        apothem: f64,
+    },
+}
+
+impl Shape {
+    /// The shape of a circle or polygon aperture (`None` for a kernel image).
+    pub fn of(aperture: &Aperture) -> Option<Self> {
+        match aperture {
+            Aperture::Circle => Some(Shape::Circle),
+            Aperture::Polygon {
+                blades,
+                rotation_deg,
+            } => {
+                let n = *blades as f64;
+                let sector = 2.0 * std::f64::consts::PI / n;
+                // Aperture::gauge is largest (|v| / cos(pi/n)) where its angle to the
+                // nearest normal is 0: at angles rotation + k sector.
+                let rot = rotation_deg.to_radians();
+                let normals = (0..*blades)
+                    .map(|k| {
+                        let a = rot + k as f64 * sector;
+                        (a.cos(), a.sin())
+                    })
+                    .collect();
+                Some(Shape::Polygon {
+                    normals,
+                    apothem: (sector / 2.0).cos(),
+                })
+            }
+            Aperture::Kernel(_) => None,
+        }
+    }
+
+    /// The gauge of offset `(vx, vy)` by this shape's formula (for tests against
+    /// [`Aperture::gauge`]).
+    #[cfg(test)]
+    pub fn gauge(&self, vx: f64, vy: f64) -> f64 {
+        match self {
+            Shape::Circle => (vx * vx + vy * vy).sqrt(),
+            Shape::Polygon { normals, apothem } => {
+                normals
+                    .iter()
+                    .map(|&(nx, ny)| nx * vx + ny * vy)
+                    .fold(f64::NEG_INFINITY, f64::max)
+                    / apothem
+            }
+        }
+    }
+
+    /// The columns `vx` (an integer interval) with `gauge(sign * vx, sign * vy) <= c` on
+    /// row `vy`, or `None`. `sign = 1` for tap offsets `y - x`, `-1` for receiver offsets
+    /// `x - y`. Monotone in `c`: a smaller bound gives a sub-interval.
+    #[inline]
+    pub fn interval(&self, c: f64, vy: isize, sign: f64) -> Option<(isize, isize)> {
+        if c < 0.0 {
+            return None;
+        }
+        let vy = vy as f64;
+        match self {
+            Shape::Circle => {
+                let q = c * c - vy * vy;
+                if q < 0.0 {
+                    return None;
+                }
+                let h = floor_sqrt(q, q.sqrt() as isize);
+                Some((-h, h))
+            }
+            Shape::Polygon { normals, apothem } => {
+                // For all k: nx (s vx) + ny (s vy) <= c apothem.
+                let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+                let cc = c * apothem;
+                for &(nx, ny) in normals {
+                    let a = sign * nx;
+                    let b = cc - sign * ny * vy;
+                    if a > 1e-12 {
+                        hi = hi.min(b / a);
+                    } else if a < -1e-12 {
+                        lo = lo.max(b / a);
+                    } else if b < 0.0 {
+                        return None;
+                    }
+                }
+                let (lo, hi) = (lo.ceil(), hi.floor());
+                (lo <= hi).then_some((lo as isize, hi as isize))
+            }
+        }
+    }
+}
+
+/// The largest integer `h` with `h^2 <= q` (`q >= 0`), found from a guess (exact: the
+/// circle's row half-width, [`Shape::interval`]; a neighbouring source's is usually right).
+#[inline(always)]
+pub fn floor_sqrt(q: f64, guess: isize) -> isize {
+    let mut h = guess.max(0);
+    while (h * h) as f64 > q {
+        h -= 1;
+    }
+    while ((h + 1) * (h + 1)) as f64 <= q {
+        h += 1;
+    }
+    h
+}
+
+/// The gauge of every window offset, padded by [`TABLE_MARGIN`] columns on each side, with
+/// the window mask `M` folded in: entries outside the window (and in the margins) hold
+/// [`GaugeTable::MASKED`] and mask 0. Row `t` is the vertical offset `t - R`, column `m` the
+/// horizontal offset `m - R - TABLE_MARGIN`.
+pub struct GaugeTable<T> {
+    /// The window radius `R`.
+    pub big_r: usize,
+    /// Row length, `2R + 1 + 2 TABLE_MARGIN`.
+    pub stride: usize,
+    /// `(2R + 1) * stride` gauges.
+    pub gauge: Vec<T>,
+    /// The window mask `M` (1 inside the window, 0 outside and in the margins), laid out
+    /// as the gauges.
+    pub mask: Vec<T>,
+    /// Per row, the largest `|offset|` inside the window (`None` if none).
+    pub half_width: Vec<Option<usize>>,
+}
+
+impl<T: Real> GaugeTable<T> {
+    /// Gauge value of masked entries (their mask is 0; the value keeps the step finite).
+    pub const MASKED: f64 = 1.0e6;
+
+    /// The table of `aperture`'s gauge at offsets `sign * (dx, dy)` (`sign = 1`: tap
+    /// offsets `y - x`, for gathers; `-1`: receiver offsets `x - y`, for scatters).
+    pub fn new(aperture: &Aperture, big_r: usize, sign: isize) -> Self {
+        let r = big_r as isize;
+        let stride = 2 * big_r + 1 + 2 * TABLE_MARGIN;
+        let mut gauge = vec![T::c(Self::MASKED); (2 * big_r + 1) * stride];
+        let mut mask = vec![T::zero(); (2 * big_r + 1) * stride];
+        let mut half_width = vec![None; 2 * big_r + 1];
+        for dy in -r..=r {
+            let t = (dy + r) as usize;
+            for dx in -r..=r {
+                let (tx, ty) = (sign * dx, sign * dy);
+                if model::in_window(tx, ty, big_r) {
+                    gauge[t * stride + (dx + r) as usize + TABLE_MARGIN] =
+                        T::c(aperture.gauge(tx as f64, ty as f64));
+                    mask[t * stride + (dx + r) as usize + TABLE_MARGIN] = T::one();
+                    let hw: &mut Option<usize> = &mut half_width[t];
+                    *hw = Some(hw.unwrap_or(0).max(dx.unsigned_abs()));
+                }
+            }
+        }
+        GaugeTable {
+            big_r,
+            stride,
+            gauge,
+            mask,
+            half_width,
+        }
+    }
+
+    /// The [`LANES`] gauges of row offset `dy` from column offset `dx0`.
+    #[inline(always)]
+    pub fn chunk(&self, dy: isize, dx0: isize) -> &[T; LANES] {
+        let t = (dy + self.big_r as isize) as usize;
+        let m = (dx0 + (self.big_r + TABLE_MARGIN) as isize) as usize;
+        self.gauge[t * self.stride + m..t * self.stride + m + LANES]
+            .try_into()
+            .expect("LANES gauges")
+    }
+
+    /// The [`LANES`] window masks of row offset `dy` from column offset `dx0`.
+    #[inline(always)]
+    pub fn mask_chunk(&self, dy: isize, dx0: isize) -> &[T; LANES] {
+        let t = (dy + self.big_r as isize) as usize;
+        let m = (dx0 + (self.big_r + TABLE_MARGIN) as isize) as usize;
+        self.mask[t * self.stride + m..t * self.stride + m + LANES]
+            .try_into()
+            .expect("LANES")
+    }
+
+    /// The window's half-width on row `dy` (`None` if the row is outside the window).
+    #[inline(always)]
+    pub fn window_half_width(&self, dy: isize) -> Option<usize> {
+        let r = self.big_r as isize;
+        if dy < -r || dy > r {
+            return None;
+        }
+        self.half_width[(dy + r) as usize]
+    }
+}
+
+/// One row of a disc: the interior columns and the ring runs (offsets relative to the
+/// disc's centre column), clipped to the window.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DiscRow {
+    /// The interior `[lo, hi]`, if any.
+    pub interior: Option<(isize, isize)>,
+    /// The ring left of the interior (or the whole ring when there is no interior).
+    pub left: Option<(isize, isize)>,
+    /// The ring right of the interior.
+    pub right: Option<(isize, isize)>,
+}
+
+/// The row `dy` of a disc of radius `r` with ring widths `rings`, clipped to the window's
+/// half-width `window_hw`; `sign` as in [`Shape::interval`]. `None` if the row holds no tap.
+#[inline(always)]
+pub fn disc_row(
+    shape: &Shape,
+    rings: Rings,
+    r: f64,
+    dy: isize,
+    window_hw: usize,
+    sign: f64,
+) -> Option<DiscRow> {
+    let hw = window_hw as isize;
+    let clip = |(lo, hi): (isize, isize)| {
+        let (lo, hi) = (lo.max(-hw), hi.min(hw));
+        (lo <= hi).then_some((lo, hi))
+    };
+    let outer = clip(shape.interval(r + rings.outer_px, dy, sign)?)?;
+    let inner = shape.interval(r - rings.inner_px, dy, sign).and_then(clip);
+    Some(match inner {
+        None => DiscRow {
+            interior: None,
+            left: Some(outer),
+            right: None,
+        },
+        Some((lo, hi)) => DiscRow {
+            interior: Some((lo, hi)),
+            left: (outer.0 < lo).then_some((outer.0, lo - 1)),
+            right: (hi < outer.1).then_some((hi + 1, outer.1)),
+        },
+    })
+}
+
+/// The soft step of a ring tap, `S(max(r - g, STEP_ARGUMENT_MIN)) M`, with the window
+/// mask `m` (1 or 0, [`GaugeTable::mask_chunk`]): branch-free.
+#[inline(always)]
+pub fn ring_step<T: Real, const SHARP: bool>(r: T, g: T, m: T) -> T {
+    let u = (r - g).max(T::c(STEP_ARGUMENT_MIN));
+    let s = if SHARP {
+        model::sharp_step_fast(u)
+    } else {
+        model::soft_step_fast(u)
+    };
+    s * m
+}
+
+/// [`ring_step`] of a chunk of [`LANES`] taps of row `dy` from offset `dx0`.
+#[inline(always)]
+pub fn ring_steps<T: Real, const SHARP: bool>(
+    table: &GaugeTable<T>,
+    r: T,
+    dy: isize,
+    dx0: isize,
+) -> [T; LANES] {
+    let (g, m) = (table.chunk(dy, dx0), table.mask_chunk(dy, dx0));
+    let mut s = [T::zero(); LANES];
+    for l in 0..LANES {
+        s[l] = ring_step::<T, SHARP>(r, g[l], m[l]);
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn polygons() -> Vec<Aperture> {
+        vec![
+            Aperture::Polygon {
+                blades: 6,
+                rotation_deg: 10.0,
+            },
+            Aperture::Polygon {
+                blades: 3,
+                rotation_deg: 0.0,
+            },
+            Aperture::Polygon {
+                blades: 5,
+                rotation_deg: -33.0,
+            },
+        ]
+    }
+
+    #[test]
+    fn shape_gauge_matches_the_aperture() {
+        for a in polygons().into_iter().chain([Aperture::Circle]) {
+            let shape = Shape::of(&a).unwrap();
+            for i in 0..400 {
+                let (vx, vy) = ((i % 29) as f64 - 14.0, (i / 29) as f64 - 7.0);
+                let (g, want) = (shape.gauge(vx, vy), a.gauge(vx, vy));
+                assert!((g - want).abs() < 1e-9, "{a:?} ({vx}, {vy}): {g} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn intervals_hold_exactly_the_columns_within_the_gauge_bound() {
+        for a in polygons().into_iter().chain([Aperture::Circle]) {
+            let shape = Shape::of(&a).unwrap();
+            for sign in [1.0, -1.0] {
+                for c in [0.0, 0.4, 1.0, 2.5, 7.3, 19.9] {
+                    for vy in -22isize..=22 {
+                        let inside: Vec<isize> = (-40isize..=40)
+                            .filter(|&vx| a.gauge(sign * vx as f64, sign * vy as f64) <= c + 1e-9)
+                            .collect();
+                        let got = shape.interval(c, vy, sign);
+                        match got {
+                            None => assert!(inside.is_empty(), "{a:?} c {c} vy {vy}"),
+                            Some((lo, hi)) => {
+                                assert_eq!(
+                                    inside,
+                                    (lo..=hi).collect::<Vec<_>>(),
+                                    "{a:?} c {c} vy {vy} sign {sign}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ring_widths_meet_their_bounds() {
+        for step in [ScatterStep::Paper, ScatterStep::Sharp] {
+            let rings = Rings::of(step);
+            let s_in = model::scatter_step(step, rings.inner_px);
+            assert!(
+                1.0 - s_in <= INTERIOR_DEFECT * 1.0001,
+                "{step:?}: {}",
+                1.0 - s_in
+            );
+            let s_out = model::scatter_step(step, -rings.outer_px);
+            assert!(s_out <= 1.4e-7, "{step:?}: {s_out}");
+            let s_min = model::scatter_step(step, STEP_ARGUMENT_MIN) as f32;
+            assert!(s_min.is_normal() && s_min < 3e-17, "{step:?}: {s_min}");
+        }
+    }
+}

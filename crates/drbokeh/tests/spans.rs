@@ -1,0 +1,247 @@
+//! The span engine against the fast engine (its exact reference): display-encoded output
+//! within 1e-3 (max) and 1e-4 (mean) on scenes with partial alpha, several layers, both
+//! presets, circle and polygon apertures, in-focus and blurred receivers side by side; each
+//! approximation at its worst case; identical output for any thread count.
+
+mod common;
+
+use common::{random_stack, settings};
+use drbokeh::presets::ModelOptions;
+use drbokeh::{
+    render, render_with_stats, render_with_tape_on, Aperture, Engine, Image, Layer, LayerStack,
+    NoProgress, RenderSettings,
+};
+
+/// `(max, mean)` absolute difference of two display-encoded images.
+fn display_diff(a: &Image<f32>, b: &Image<f32>) -> (f64, f64) {
+    let (mut max, mut sum) = (0.0f64, 0.0f64);
+    for (x, y) in a.data.iter().zip(&b.data) {
+        let d = (*x as f64 - *y as f64).abs();
+        max = max.max(d);
+        sum += d;
+    }
+    (max, sum / a.data.len() as f64)
+}
+
+fn apertures() -> Vec<Aperture> {
+    vec![
+        Aperture::Circle,
+        Aperture::Polygon {
+            blades: 6,
+            rotation_deg: 10.0,
+        },
+        Aperture::Polygon {
+            blades: 3,
+            rotation_deg: 0.0,
+        },
+    ]
+}
+
+fn presets(s: RenderSettings) -> [RenderSettings; 2] {
+    [s.clone(), s.with_model(ModelOptions::PHYSICAL)]
+}
+
+/// Two layers: an in-focus, partially transparent disc in front of a background whose
+/// disparity ramps across focus (in-focus and blurred receivers side by side).
+fn blobs(w: usize, h: usize) -> LayerStack<f32> {
+    let mut front = Layer::<f32>::constant(w, h, [0.9, 0.4, 0.1], 0.0, 0.85);
+    let mut back = Layer::<f32>::constant(w, h, [0.0; 3], 1.0, 0.1);
+    for y in 0..h {
+        for x in 0..w {
+            let r = ((x as f32 - 20.0).powi(2) + (y as f32 - 45.0).powi(2)).sqrt();
+            front.alpha.data[y * w + x] = (1.0 - (r - 9.0) / 2.0).clamp(0.0, 1.0);
+            for c in 0..3 {
+                back.rgb_encoded.data[3 * (y * w + x) + c] = ((x / 5 + y / 7 + c) % 3) as f32 / 2.0;
+            }
+            back.disparity.data[y * w + x] = 0.1 + 0.8 * x as f32 / w as f32;
+        }
+    }
+    LayerStack::new(vec![front, back]).unwrap()
+}
+
+fn check(stack: &LayerStack<f32>, s: &RenderSettings, what: &str) -> (f64, f64) {
+    let fast = render(stack, s, Engine::Fast, &NoProgress).unwrap();
+    let (spans, stats) = render_with_stats(stack, s, Engine::Spans, &NoProgress).unwrap();
+    let (max, mean) = display_diff(&fast, &spans);
+    eprintln!("{what}: max {max:.2e} mean {mean:.2e} {stats:?}");
+    assert_eq!(stats.tap_layers, 0, "{what}: every band-layer as spans");
+    assert!(
+        max <= 1e-3 && mean <= 1e-4,
+        "{what}: max {max:e} mean {mean:e}"
+    );
+    (max, mean)
+}
+
+#[test]
+fn spans_match_fast_on_random_stacks() {
+    for (i, aperture) in apertures().into_iter().enumerate() {
+        let stack = random_stack::<f32>(50 + i as u64, 90, 77, 3);
+        for s in presets(settings(0.5, 20.0, 41, aperture.clone())) {
+            check(&stack, &s, &format!("random {aperture:?} {:?}", s.preset));
+        }
+    }
+}
+
+#[test]
+fn spans_match_fast_with_focus_and_blur_side_by_side() {
+    let stack = blobs(96, 90);
+    for (focus, k, window) in [(0.85, 30.0, 61), (0.5, 30.0, 61), (0.3, 100.0, 121)] {
+        for aperture in apertures() {
+            for s in presets(settings(focus, k, window, aperture.clone())) {
+                check(
+                    &stack,
+                    &s,
+                    &format!("blobs f {focus} K {k} {aperture:?} {:?}", s.preset),
+                );
+            }
+        }
+    }
+}
+
+/// Odd and tiny sizes (single rows and columns, fewer pixels than the blur radius), where
+/// every pixel is an edge pixel and the mirror padding holds most of the disc.
+#[test]
+fn spans_match_fast_on_odd_sizes_and_edges() {
+    for (i, (w, h)) in [(1, 1), (1, 9), (13, 1), (7, 5), (33, 17), (65, 3)]
+        .into_iter()
+        .enumerate()
+    {
+        let stack = random_stack::<f32>(70 + i as u64, w, h, 2);
+        for aperture in apertures().into_iter().take(2) {
+            for s in presets(settings(0.3, 40.0, 41, aperture.clone())) {
+                check(&stack, &s, &format!("{w}x{h} {aperture:?} {:?}", s.preset));
+            }
+        }
+    }
+}
+
+/// Radii of 60 px and more (discs larger than the image, an unclipped window), both presets.
+#[test]
+fn spans_match_fast_at_large_radius() {
+    let stack = random_stack::<f32>(91, 71, 53, 2);
+    for aperture in apertures().into_iter().take(2) {
+        for s in presets(settings(0.9, 150.0, 301, aperture.clone())) {
+            check(
+                &stack,
+                &s,
+                &format!("large radius {aperture:?} {:?}", s.preset),
+            );
+        }
+    }
+}
+
+/// The worst case of the interior approximation (`S := 1` within `1e-5` of 1): isolated
+/// bright points on an opaque black layer, blurred uniformly, where the layer colour is a
+/// small weighted mean (near black, the steepest part of the display encoding). In linear
+/// light the documented bound is `2e-5 (2L + 1)` relative (L = 1 layer); the ring's tail
+/// beyond `r + u_out` (at most `6.8e-8` per tap, sharp step; the paper step's tail is the
+/// fast engine's own) adds an absolute error of at most its tap count times that.
+#[test]
+fn interior_approximation_meets_its_bound_on_bright_points() {
+    let (w, h) = (97, 83);
+    let mut layer = Layer::<f32>::constant(w, h, [0.0; 3], 0.9, 1.0);
+    for (x, y) in [(10, 12), (50, 40), (51, 40), (90, 75), (3, 80)] {
+        for c in 0..3 {
+            layer.rgb_encoded.data[3 * (y * w + x) + c] = 1.0;
+        }
+    }
+    let stack = LayerStack::new(vec![layer]).unwrap();
+    for aperture in apertures().into_iter().take(2) {
+        for s in presets(settings(0.1, 30.0, 61, aperture.clone())) {
+            let what = format!("bright points {aperture:?} {:?}", s.preset);
+            check(&stack, &s, &what);
+            let fast = render(&stack, &s, Engine::Fast, &NoProgress).unwrap();
+            let spans = render(&stack, &s, Engine::Spans, &NoProgress).unwrap();
+            let tone = s.tone();
+            let peak = fast
+                .data
+                .iter()
+                .fold(0.0f64, |m, v| m.max(tone.linearize(*v as f64)));
+            let mut worst = 0.0f64;
+            for (a, b) in fast.data.iter().zip(&spans.data) {
+                let (a, b) = (tone.linearize(*a as f64), tone.linearize(*b as f64));
+                // f32 rounding of the encoded output: a few ulps of the value.
+                let allowed = 6e-5 * a + 1e-6 * peak + 4.0 * f32::EPSILON as f64 * a;
+                worst = worst.max((a - b).abs() / allowed);
+            }
+            eprintln!("{what}: worst error / bound {worst:.3}");
+            assert!(worst <= 1.0, "{what}: error {worst} x the bound");
+        }
+    }
+}
+
+/// The same bytes for any thread count (bands and sub-bands in a fixed order).
+#[test]
+fn spans_are_identical_for_any_thread_count() {
+    let stack = random_stack::<f32>(17, 61, 45, 3);
+    for engine in [Engine::Spans, Engine::Auto] {
+        for s in presets(settings(0.5, 25.0, 41, Aperture::Circle)) {
+            let run = |n: usize| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .unwrap()
+                    .install(|| {
+                        let out = render(&stack, &s, engine, &NoProgress).unwrap();
+                        out.data.iter().map(|v| v.to_bits()).collect::<Vec<u32>>()
+                    })
+            };
+            let one = run(1);
+            for n in [2, 3] {
+                assert!(one == run(n), "{engine:?}: {n} threads differ from 1");
+            }
+        }
+    }
+}
+
+/// `auto` stays within the span engine's bounds of the fast engine whatever it picks.
+#[test]
+fn auto_matches_fast() {
+    let stack = blobs(96, 90);
+    for (focus, k) in [(0.85, 10.0), (0.5, 30.0)] {
+        for s in presets(settings(focus, k, 61, Aperture::Circle)) {
+            let fast = render(&stack, &s, Engine::Fast, &NoProgress).unwrap();
+            let auto = render(&stack, &s, Engine::Auto, &NoProgress).unwrap();
+            let (max, mean) = display_diff(&fast, &auto);
+            assert!(
+                max <= 1e-3 && mean <= 1e-4,
+                "auto f {focus} K {k}: {max:e} {mean:e}"
+            );
+        }
+    }
+}
+
+/// The span engine's tape is the fast adjoint's (an exact-within-1e-5 adjoint, tested
+/// against the threaded one in `tests/fast_adjoint.rs`): the same output and gradients.
+#[test]
+fn spans_tape_is_the_fast_adjoint() {
+    let stack = random_stack::<f32>(23, 31, 27, 2);
+    let s = settings(0.5, 15.0, 31, Aperture::Circle).with_model(ModelOptions::PHYSICAL);
+    let g = Image::from_vec(
+        31,
+        27,
+        3,
+        (0..31 * 27 * 3)
+            .map(|i| ((i * 7919) % 13) as f32 / 6.0 - 1.0)
+            .collect(),
+    )
+    .unwrap();
+    let run = |engine| {
+        let (out, tape) = render_with_tape_on(&stack, &s, engine, &NoProgress).unwrap();
+        let r = tape.backward(&g, &NoProgress).unwrap();
+        let mut bits: Vec<u32> = out.data.iter().map(|v| v.to_bits()).collect();
+        for l in &r.layers {
+            bits.extend(
+                l.rgb
+                    .data
+                    .iter()
+                    .chain(&l.alpha.data)
+                    .chain(&l.disparity.data)
+                    .map(|v| v.to_bits()),
+            );
+        }
+        (bits, r.blur_k.to_bits(), r.focus.to_bits())
+    };
+    let fast = run(Engine::Fast);
+    assert!(fast == run(Engine::Spans) && fast == run(Engine::Auto));
+}
