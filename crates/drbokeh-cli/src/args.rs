@@ -2,6 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use drbokeh::highlight::HighlightRecovery;
 use drbokeh::io::{DepthKind, DisparityOptions};
 use drbokeh::scene::{self, Focus, Layering, PhotoFiles, Scene, Source, View};
 use drbokeh::Real;
@@ -98,9 +99,12 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 0.0)]
     pub offset: f64,
 
-    /// Boost bright, defocused highlights (brighter bokeh balls), as in the paper's tool.
-    #[arg(long)]
-    pub highlight: bool,
+    /// Highlight recovery of a photo's clipped highlights, in linear light (brighter bokeh
+    /// balls; docs/highlights.md): GAIN[:THRESHOLD] (e.g. 4:0.85, the default; plain
+    /// --highlight means the default), `off`, or `paper` (the paper's 1 + 0.2 m boost
+    /// instead).
+    #[arg(long, value_name = "GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "default")]
+    pub highlight: Option<String>,
 
     /// Aperture shape: circle, polygon:N[:DEG] (N blades rotated by DEG degrees), a name
     /// (triangle, square, pentagon, hexagon, heptagon, octagon), or kernel:IMAGE (a grey
@@ -244,13 +248,20 @@ impl CameraArgs {
             }
             (None, None) => Focus::Auto,
         };
+        let (highlight, highlight_recovery) = match self.highlight.as_deref() {
+            None | Some("default") => (false, View::default().highlight_recovery),
+            Some("off") => (false, None),
+            Some("paper") => (true, None),
+            Some(spec) => (false, Some(HighlightRecovery::parse(spec)?)),
+        };
         Ok(View {
             focus,
             blur_k: self.blur_k,
             window: self.window,
             gamma: self.gamma,
             offset: self.offset,
-            highlight: self.highlight,
+            highlight,
+            highlight_recovery,
             aperture: scene::parse_aperture(&self.aperture)?,
             preset: self.preset.parse()?,
         })
@@ -288,6 +299,8 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "demo_size" => "--demo-size",
         "methods" => "--methods",
         "focal_planes" => "--focal-planes",
+        "highlight" => "--highlight",
+        "highlight_range" => "--highlight-range",
         _ => return None,
     })
 }

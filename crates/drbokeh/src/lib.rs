@@ -20,6 +20,7 @@ pub mod camera;
 pub mod demo;
 pub mod dfd;
 pub mod engine;
+pub mod highlight;
 mod error;
 pub mod eval;
 pub mod image;

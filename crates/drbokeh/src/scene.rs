@@ -26,6 +26,8 @@
 //!   [`crate::layering::layers_from_disparity`]); with a matte, the paper's two layers; or
 //!   one opaque layer on request ([`Layering::SingleLayer`]). Linear (EXR) colour is
 //!   display-encoded with the transfer the renderer will undo ([`read_display_image`]).
+//!   Before that, a display-encoded photo's clipped highlights are recovered
+//!   ([`View::highlight_recovery`], docs/highlights.md).
 //!
 //! Errors name the parameter as this module spells it (`focus`, `focus_at`, `blur`,
 //! `window`, `gamma`, `offset`, `aperture`, `preset`, `max_layers`, `demo_size`); front ends
@@ -35,6 +37,7 @@ use crate::aperture::{Aperture, KernelImage};
 use crate::camera::{Camera, Window, WindowCap};
 use crate::demo;
 use crate::engine::Engine;
+use crate::highlight::HighlightRecovery;
 use crate::image::{check_dimensions, Image};
 use crate::io::{self, DepthKind, DisparityOptions};
 use crate::layering::{self, LayeringOptions};
@@ -160,8 +163,12 @@ pub struct View {
     pub gamma: f64,
     /// Offset of the display encoding.
     pub offset: f64,
-    /// Highlight boost.
+    /// The paper's highlight boost inside the model (docs/model.md, M20).
     pub highlight: bool,
+    /// Highlight recovery of a display-encoded photo before it becomes layers
+    /// ([`HighlightRecovery`], docs/highlights.md); `None`: off. Not applied to stacks,
+    /// the demo or linear (EXR) images, whose highlights are not clipped.
+    pub highlight_recovery: Option<HighlightRecovery>,
     /// Aperture shape ([`parse_aperture`] reads the textual form).
     pub aperture: Aperture,
     /// Model preset.
@@ -169,9 +176,9 @@ pub struct View {
 }
 
 impl Default for View {
-    /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost, a
-    /// circular aperture and the `physical` preset (the CLI's and the Python module's
-    /// defaults).
+    /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost,
+    /// the default highlight recovery ([`HighlightRecovery::DEFAULT`]), a circular
+    /// aperture and the `physical` preset (the CLI's and the Python module's defaults).
     fn default() -> Self {
         let cam = Camera::paper_default(0.5);
         View {
@@ -181,6 +188,7 @@ impl Default for View {
             gamma: cam.gamma,
             offset: cam.offset,
             highlight: cam.highlight,
+            highlight_recovery: Some(HighlightRecovery::DEFAULT),
             aperture: Aperture::Circle,
             preset: Preset::Physical,
         }
@@ -294,7 +302,18 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
             check_dimensions("demo_size", width, height)?;
             (demo::scene(width, height), vec![])
         }
-        Source::PhotoFiles(files) => photo_stack(read_photo(&files, &view.tone())?, view, engine)?,
+        Source::PhotoFiles(files) => {
+            let photo = read_photo(&files, &view.tone())?;
+            if io::is_linear(&files.image) {
+                let view = View {
+                    highlight_recovery: None,
+                    ..view.clone()
+                };
+                photo_stack(photo, &view, engine)?
+            } else {
+                photo_stack(photo, view, engine)?
+            }
+        }
         Source::Photo(photo) => photo_stack(photo, view, engine)?,
     };
     let (settings, note) = view.settings_for(&stack, engine)?;
@@ -306,8 +325,9 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
     })
 }
 
-/// The layer stack of a photo: the matte's two layers, one layer, or a decomposition for
-/// the focus and blur the view resolves to on the image as one layer.
+/// The layer stack of a photo: its highlights recovered (`view.highlight_recovery`), then
+/// the matte's two layers, one layer, or a decomposition for the focus and blur the view
+/// resolves to on the image as one layer.
 fn photo_stack<T: Real>(
     photo: Photo<T>,
     view: &View,
@@ -319,6 +339,22 @@ fn photo_stack<T: Real>(
         matte,
         layering,
     } = photo;
+    let rgb_encoded = match &view.highlight_recovery {
+        Some(r) => {
+            // Focus and blur as they resolve on the image as one layer.
+            let probe = LayerStack::single(rgb_encoded.clone(), disparity.clone())?;
+            let (settings, _) = view.settings_for(&probe, engine)?;
+            let cam = &settings.camera;
+            r.apply(
+                &rgb_encoded,
+                &disparity,
+                cam.focus_disparity,
+                cam.blur_k,
+                &view.tone(),
+            )?
+        }
+        None => rgb_encoded,
+    };
     if let Some(matte) = matte {
         let stack = layering::two_layers_from_matte(&rgb_encoded, &disparity, &matte)?;
         return Ok((stack, vec![]));
