@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use drbokeh::highlight::HighlightRecovery;
+use drbokeh::highlight::PhotoHighlights;
 use drbokeh::io::{DepthKind, DisparityOptions};
 use drbokeh::scene::{self, Focus, Layering, PhotoFiles, Scene, Source, View};
 use drbokeh::Real;
@@ -99,11 +99,11 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 0.0)]
     pub offset: f64,
 
-    /// Highlight recovery of a photo's clipped highlights, in linear light (brighter bokeh
-    /// balls; docs/highlights.md): GAIN[:THRESHOLD] (e.g. 4:0.85, the default; plain
-    /// --highlight means the default), `off`, or `paper` (the paper's 1 + 0.2 m boost
-    /// instead).
-    #[arg(long, value_name = "GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "default")]
+    /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `paper`
+    /// (the paper's 1 + 0.2 m boost; plain --highlight; the default for photos), `off`, or
+    /// GAIN[:THRESHOLD] (recovery of each clipped region of a photo in linear light, e.g.
+    /// 2:0.95). Without the flag: `paper` for --image, off for stacks and the demo.
+    #[arg(long, value_name = "GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "paper")]
     pub highlight: Option<String>,
 
     /// Aperture shape: circle, polygon:N[:DEG] (N blades rotated by DEG degrees), a name
@@ -248,11 +248,10 @@ impl CameraArgs {
             }
             (None, None) => Focus::Auto,
         };
-        let (highlight, highlight_recovery) = match self.highlight.as_deref() {
-            None | Some("default") => (false, View::default().highlight_recovery),
-            Some("off") => (false, None),
-            Some("paper") => (true, None),
-            Some(spec) => (false, Some(HighlightRecovery::parse(spec)?)),
+        let (highlight, photo_highlights) = match self.highlight.as_deref() {
+            None => (false, PhotoHighlights::default()),
+            Some("paper") => (true, PhotoHighlights::PaperBoost),
+            Some(spec) => (false, PhotoHighlights::parse(spec)?),
         };
         Ok(View {
             focus,
@@ -261,7 +260,7 @@ impl CameraArgs {
             gamma: self.gamma,
             offset: self.offset,
             highlight,
-            highlight_recovery,
+            photo_highlights,
             aperture: scene::parse_aperture(&self.aperture)?,
             preset: self.preset.parse()?,
         })

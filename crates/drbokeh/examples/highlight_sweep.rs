@@ -5,14 +5,14 @@
 //! cargo run --release -p drbokeh --example highlight_sweep -- PRESET SPEC[,SPEC...] BENCHMARK...
 //! ```
 //! `PRESET` is `physical` or `paper`; each `SPEC` is `off`, `paper` (the paper's boost) or
-//! `GAIN:THRESHOLD`, optionally followed by `/single` (one opaque layer instead of the
+//! `GAIN:THRESHOLD`, optionally followed by `+paper` (with the paper's boost as well) and `/single` (one opaque layer instead of the
 //! decomposition).
 
 use drbokeh::eval::metrics::psnr;
 use drbokeh::eval::report::{
     bucket_of, list_scenes, render_method, render_photo_pipeline, Method, SceneInputs,
 };
-use drbokeh::highlight::HighlightRecovery;
+use drbokeh::highlight::PhotoHighlights;
 use drbokeh::io::DepthKind;
 use drbokeh::scene::{Layering, PhotoFiles, Source, View};
 use std::collections::BTreeMap;
@@ -48,24 +48,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Some(c) => (c, true),
                     None => (*spec, false),
                 };
-                match spec_core {
-                    "off" => view.highlight_recovery = None,
-                    "paper" => {
-                        view.highlight_recovery = None;
-                        view.highlight = true;
-                    }
-                    s => view.highlight_recovery = Some(HighlightRecovery::parse(s)?),
-                }
+                let (spec_core, with_paper) = match spec_core.strip_suffix("+paper") {
+                    Some(c) => (c, true),
+                    None => (spec_core, false),
+                };
+                view.photo_highlights = PhotoHighlights::parse(spec_core)?;
                 let mut files = PhotoFiles::new(
                     dir.join("aif.png"),
                     dir.join("disparity.npy"),
                     DepthKind::Disparity,
                 );
+                view.highlight |= with_paper;
                 if single {
                     files.layering = Layering::SingleLayer;
                 }
-                let mut out =
-                    render_photo_pipeline(preset, Source::PhotoFiles(files), &scene.camera(), view)?;
+                let mut out = render_photo_pipeline(
+                    preset,
+                    Source::PhotoFiles(files),
+                    &scene.camera(),
+                    view,
+                )?;
                 out.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
                 push(spec, psnr(&out, &scene.ground_truth)?);
             }

@@ -32,6 +32,31 @@ use crate::{Error, Real, Result};
 /// Encoded level at or above which a channel counts as clipped (254.5/255).
 pub const CLIPPED_LEVEL: f64 = 254.5 / 255.0;
 
+/// How a display-encoded photo's highlights are treated ([`crate::scene::View`]); stacks,
+/// the demo and linear (EXR) photos are not touched by it.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum PhotoHighlights {
+    /// As the photo shows them.
+    Off,
+    /// The paper's boost inside the model (docs/model.md, M20; the camera's `highlight`):
+    /// the default, the best of the settings measured in docs/highlights.md.
+    #[default]
+    PaperBoost,
+    /// Per-region recovery (this module).
+    Recover(HighlightRecovery),
+}
+
+impl PhotoHighlights {
+    /// Parses `off`, `paper`, or `GAIN[:THRESHOLD]` ([`HighlightRecovery::parse`]).
+    pub fn parse(spec: &str) -> Result<Self> {
+        Ok(match spec.trim() {
+            "off" => PhotoHighlights::Off,
+            "paper" => PhotoHighlights::PaperBoost,
+            s => PhotoHighlights::Recover(HighlightRecovery::parse(s)?),
+        })
+    }
+}
+
 /// Highlight recovery parameters (see the module documentation).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HighlightRecovery {
@@ -42,11 +67,11 @@ pub struct HighlightRecovery {
 }
 
 impl HighlightRecovery {
-    /// The default recovery: gain 4, threshold 0.85 (chosen on the tuning benchmarks of
-    /// docs/highlights.md).
+    /// The best recovery measured on the tuning benchmarks of docs/highlights.md: gain 2,
+    /// threshold 0.95 (the threshold of `GAIN` without one).
     pub const DEFAULT: HighlightRecovery = HighlightRecovery {
-        gain: 4.0,
-        threshold: 0.85,
+        gain: 2.0,
+        threshold: 0.95,
     };
 
     /// Checks `1 <= gain <= 1000` and `0 < threshold < 1`; messages name `highlight`.
@@ -71,7 +96,7 @@ impl HighlightRecovery {
         let bad = || {
             Error::param(
                 "highlight",
-                format!("expected GAIN[:THRESHOLD] (e.g. 4 or 4:0.85), got '{spec}'"),
+                format!("expected GAIN[:THRESHOLD] (e.g. 2 or 2:0.95), got '{spec}'"),
             )
         };
         let (g, t) = match spec.split_once(':') {
@@ -205,6 +230,18 @@ mod tests {
 
     #[test]
     fn parse_and_validate() {
+        assert_eq!(PhotoHighlights::parse("off").unwrap(), PhotoHighlights::Off);
+        assert_eq!(
+            PhotoHighlights::parse("paper").unwrap(),
+            PhotoHighlights::PaperBoost
+        );
+        assert_eq!(
+            PhotoHighlights::parse("3:0.9").unwrap(),
+            PhotoHighlights::Recover(HighlightRecovery {
+                gain: 3.0,
+                threshold: 0.9
+            })
+        );
         let r = HighlightRecovery::parse("6").unwrap();
         assert_eq!(r.gain, 6.0);
         assert_eq!(r.threshold, HighlightRecovery::DEFAULT.threshold);
@@ -246,7 +283,8 @@ mod tests {
         }
         set(&mut img, 37, 30, 39, 32, 1.0);
         let out = r.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
-        let lin = |img: &Image<f64>, x: usize, y: usize| tone().linearize(img.data[3 * (y * 40 + x)]);
+        let lin =
+            |img: &Image<f64>, x: usize, y: usize| tone().linearize(img.data[3 * (y * 40 + x)]);
         assert!((lin(&out, 2, 2) - 5.0).abs() < 1e-9, "{}", lin(&out, 2, 2));
         // 200 px area: gain 1 + 4 * 16/200.
         assert!((lin(&out, 15, 25) - (1.0 + 4.0 * 16.0 / 200.0)).abs() < 1e-9);

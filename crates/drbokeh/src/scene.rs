@@ -26,8 +26,9 @@
 //!   [`crate::layering::layers_from_disparity`]); with a matte, the paper's two layers; or
 //!   one opaque layer on request ([`Layering::SingleLayer`]). Linear (EXR) colour is
 //!   display-encoded with the transfer the renderer will undo ([`read_display_image`]).
-//!   Before that, a display-encoded photo's clipped highlights are recovered
-//!   ([`View::highlight_recovery`], docs/highlights.md).
+//! - **Highlights.** A display-encoded photo's clipped highlights get the paper's boost by
+//!   default, or a per-region recovery before the decomposition
+//!   ([`View::photo_highlights`], docs/highlights.md).
 //!
 //! Errors name the parameter as this module spells it (`focus`, `focus_at`, `blur`,
 //! `window`, `gamma`, `offset`, `aperture`, `preset`, `max_layers`, `demo_size`); front ends
@@ -37,7 +38,7 @@ use crate::aperture::{Aperture, KernelImage};
 use crate::camera::{Camera, Window, WindowCap};
 use crate::demo;
 use crate::engine::Engine;
-use crate::highlight::HighlightRecovery;
+use crate::highlight::PhotoHighlights;
 use crate::image::{check_dimensions, Image};
 use crate::io::{self, DepthKind, DisparityOptions};
 use crate::layering::{self, LayeringOptions};
@@ -165,10 +166,10 @@ pub struct View {
     pub offset: f64,
     /// The paper's highlight boost inside the model (docs/model.md, M20).
     pub highlight: bool,
-    /// Highlight recovery of a display-encoded photo before it becomes layers
-    /// ([`HighlightRecovery`], docs/highlights.md); `None`: off. Not applied to stacks,
-    /// the demo or linear (EXR) images, whose highlights are not clipped.
-    pub highlight_recovery: Option<HighlightRecovery>,
+    /// How a display-encoded photo's clipped highlights are treated ([`PhotoHighlights`],
+    /// docs/highlights.md): not at all, the paper's boost (the default), or recovery before
+    /// the photo becomes layers. Not applied to stacks, the demo or linear (EXR) images.
+    pub photo_highlights: PhotoHighlights,
     /// Aperture shape ([`parse_aperture`] reads the textual form).
     pub aperture: Aperture,
     /// Model preset.
@@ -176,8 +177,8 @@ pub struct View {
 }
 
 impl Default for View {
-    /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost,
-    /// the default highlight recovery ([`HighlightRecovery::DEFAULT`]), a circular
+    /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost
+    /// except for photos ([`PhotoHighlights::default`]: the paper's boost), a circular
     /// aperture and the `physical` preset (the CLI's and the Python module's defaults).
     fn default() -> Self {
         let cam = Camera::paper_default(0.5);
@@ -188,7 +189,7 @@ impl Default for View {
             gamma: cam.gamma,
             offset: cam.offset,
             highlight: cam.highlight,
-            highlight_recovery: Some(HighlightRecovery::DEFAULT),
+            photo_highlights: PhotoHighlights::default(),
             aperture: Aperture::Circle,
             preset: Preset::Physical,
         }
@@ -285,7 +286,8 @@ pub struct Scene<T> {
 /// window is not capped for [`Engine::Fast`].
 pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Result<Scene<T>> {
     let demo_view;
-    let view = match (&source, view.focus) {
+    let photo_view;
+    let mut view = match (&source, view.focus) {
         (Source::Demo { .. }, Focus::Auto) => {
             demo_view = View {
                 focus: Focus::Disparity(demo::DEMO_FOCUS),
@@ -295,6 +297,7 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
         }
         _ => view,
     };
+    let is_photo = matches!(source, Source::PhotoFiles(_) | Source::Photo(_));
     let (stack, mut notes) = match source {
         Source::Stack(stack) => (stack, vec![]),
         Source::StackFile(path) => (io::read_stack(&path)?, vec![]),
@@ -305,19 +308,21 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
         Source::PhotoFiles(files) => {
             let photo = read_photo(&files, &view.tone())?;
             if io::is_linear(&files.image) {
-                let view = View {
-                    highlight_recovery: None,
+                photo_view = View {
+                    photo_highlights: PhotoHighlights::Off,
                     ..view.clone()
                 };
-                photo_stack(photo, &view, engine)?
-            } else {
-                photo_stack(photo, view, engine)?
+                view = &photo_view;
             }
+            photo_stack(photo, view, engine)?
         }
         Source::Photo(photo) => photo_stack(photo, view, engine)?,
     };
-    let (settings, note) = view.settings_for(&stack, engine)?;
+    let (mut settings, note) = view.settings_for(&stack, engine)?;
     notes.extend(note);
+    if is_photo && view.photo_highlights == PhotoHighlights::PaperBoost {
+        settings.camera.highlight = true;
+    }
     Ok(Scene {
         stack,
         settings,
@@ -339,8 +344,8 @@ fn photo_stack<T: Real>(
         matte,
         layering,
     } = photo;
-    let rgb_encoded = match &view.highlight_recovery {
-        Some(r) => {
+    let rgb_encoded = match &view.photo_highlights {
+        PhotoHighlights::Recover(r) => {
             // Focus and blur as they resolve on the image as one layer.
             let probe = LayerStack::single(rgb_encoded.clone(), disparity.clone())?;
             let (settings, _) = view.settings_for(&probe, engine)?;
@@ -353,7 +358,7 @@ fn photo_stack<T: Real>(
                 &view.tone(),
             )?
         }
-        None => rgb_encoded,
+        _ => rgb_encoded,
     };
     if let Some(matte) = matte {
         let stack = layering::two_layers_from_matte(&rgb_encoded, &disparity, &matte)?;

@@ -33,7 +33,8 @@ pub enum Method {
     /// The `physical` preset on the ground-truth layer stack.
     PhysicalGt,
     /// The photo pipeline as `drbokeh render --image --disparity` runs it with the `paper`
-    /// preset: highlight recovery at its default, decomposition into layers, render.
+    /// preset: highlights at their default ([`crate::highlight::PhotoHighlights`]),
+    /// decomposition into layers, render.
     PhotoPaper,
     /// The photo pipeline with the `physical` preset (the CLI's default render of a photo).
     PhotoPhysical,
@@ -113,8 +114,8 @@ impl Method {
             Method::PaperGt => "Dr.Bokeh paper preset on the ground-truth layers",
             Method::PhysicalAif => "drbokeh physical preset on one opaque layer (image + disparity)",
             Method::PhysicalGt => "drbokeh physical preset on the ground-truth layers",
-            Method::PhotoPaper => "the photo pipeline as the CLI runs it (highlight recovery, decomposition into layers) with the paper preset",
-            Method::PhotoPhysical => "the photo pipeline as the CLI runs it (highlight recovery, decomposition into layers) with the physical preset: what a user gets from `drbokeh render --image --disparity`",
+            Method::PhotoPaper => "the photo pipeline as the CLI runs it (default highlight treatment, decomposition into layers) with the paper preset",
+            Method::PhotoPhysical => "the photo pipeline as the CLI runs it (default highlight treatment, decomposition into layers) with the physical preset: what a user gets from `drbokeh render --image --disparity`",
         }
     }
 
@@ -250,13 +251,12 @@ pub fn render_photo(
 }
 
 /// The view options of the photo rows that the camera does not carry: the CLI's defaults
-/// (highlight recovery at its default).
+/// (highlights at their default, [`crate::highlight::PhotoHighlights::default`]).
 pub fn photo_view_defaults() -> View {
     View::default()
 }
 
-/// Renders a photo `source` as the CLI does with `base`'s options (highlight recovery,
-/// aperture) and the camera's focus, K, gamma and offset, the automatic window and the
+/// Renders a photo `source` as the CLI does with `base`'s options (highlights, aperture) and the camera's focus, K, gamma and offset, the automatic window and the
 /// fast engine: [`crate::scene::resolve`], then [`crate::render`]. Display-encoded, not
 /// clipped.
 pub fn render_photo_pipeline(

@@ -232,14 +232,16 @@ mod tests {
     #[test]
     fn highlight_range_changes_only_the_highlights() {
         let std = scene_spec(5, 7, 20, 64, 16).unwrap();
-        let dflt =
-            scene_spec_with_highlights(5, 7, 20, 64, 16, HighlightRange::default()).unwrap();
+        let dflt = scene_spec_with_highlights(5, 7, 20, 64, 16, HighlightRange::default()).unwrap();
         assert_eq!(std, dflt);
         let bright = HighlightRange { lo: 5.0, hi: 50.0 };
         let b = scene_spec_with_highlights(5, 7, 20, 64, 16, bright).unwrap();
         assert_ne!(std, b);
         for (x, y) in std.billboards.iter().zip(&b.billboards) {
-            assert_eq!((x.depth_mm, x.center, x.size), (y.depth_mm, y.center, y.size));
+            assert_eq!(
+                (x.depth_mm, x.center, x.size),
+                (y.depth_mm, y.center, y.size)
+            );
             match &y.texture {
                 TextureSpec::Procedural {
                     highlight_range, ..
@@ -251,10 +253,14 @@ mod tests {
         let kind = ProceduralKind::Background;
         let t0 = super::super::procedural::generate(kind, 3, 96, 96);
         let t1 = super::super::procedural::generate_with_highlights(kind, 3, 96, 96, bright);
-        let peak = |t: &super::super::texture::Texture| {
-            t.data.iter().map(|p| p[0]).fold(0.0f32, f32::max)
-        };
-        assert!(peak(&t1) > peak(&t0) * 1.5, "{} vs {}", peak(&t1), peak(&t0));
+        let peak =
+            |t: &super::super::texture::Texture| t.data.iter().map(|p| p[0]).fold(0.0f32, f32::max);
+        assert!(
+            peak(&t1) > peak(&t0) * 1.5,
+            "{} vs {}",
+            peak(&t1),
+            peak(&t0)
+        );
         assert!(HighlightRange::parse("5:50").unwrap() == bright);
         assert!(HighlightRange::parse("50:5").is_err());
         assert!(HighlightRange::parse("0:5").is_err());
