@@ -2,6 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use drbokeh::highlight::PhotoHighlights;
 use drbokeh::io::{DepthKind, DisparityOptions};
 use drbokeh::scene::{self, Focus, Layering, PhotoFiles, Scene, Source, View};
 use drbokeh::Real;
@@ -98,9 +99,12 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 0.0)]
     pub offset: f64,
 
-    /// Boost bright, defocused highlights (brighter bokeh balls), as in the paper's tool.
-    #[arg(long)]
-    pub highlight: bool,
+    /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `paper`
+    /// (the paper's 1 + 0.2 m boost; plain --highlight; the default for photos), `off`, or
+    /// GAIN[:THRESHOLD] (recovery of each clipped region of a photo in linear light, e.g.
+    /// 2:0.95). Without the flag: `paper` for --image, off for stacks and the demo.
+    #[arg(long, value_name = "GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "paper")]
+    pub highlight: Option<String>,
 
     /// Aperture shape: circle, polygon:N[:DEG] (N blades rotated by DEG degrees), a name
     /// (triangle, square, pentagon, hexagon, heptagon, octagon), or kernel:IMAGE (a grey
@@ -247,13 +251,19 @@ impl CameraArgs {
             }
             (None, None) => Focus::Auto,
         };
+        let (highlight, photo_highlights) = match self.highlight.as_deref() {
+            None => (false, PhotoHighlights::default()),
+            Some("paper") => (true, PhotoHighlights::PaperBoost),
+            Some(spec) => (false, PhotoHighlights::parse(spec)?),
+        };
         Ok(View {
             focus,
             blur_k: self.blur_k,
             window: self.window,
             gamma: self.gamma,
             offset: self.offset,
-            highlight: self.highlight,
+            highlight,
+            photo_highlights,
             aperture: scene::parse_aperture(&self.aperture)?,
             preset: self.preset.parse()?,
         })
@@ -291,6 +301,8 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "demo_size" => "--demo-size",
         "methods" => "--methods",
         "focal_planes" => "--focal-planes",
+        "highlight" => "--highlight",
+        "highlight_range" => "--highlight-range",
         _ => return None,
     })
 }

@@ -11,10 +11,11 @@ use std::time::Instant;
 
 /// Evaluate every method on a ray-traced benchmark against its ground truth.
 ///
-/// Methods: gather, scatter, gausspsf, layered (classical baselines on the all-in-focus
-/// image + disparity), paper-aif (Dr.Bokeh's paper preset on the same single layer),
-/// layered-gt and paper-gt (on the ground-truth layer stack). Every method uses the scene's
-/// K and focus from scene.json.
+/// Methods: photo-physical and photo-paper (the headline: `drbokeh render --image aif.png
+/// --disparity disparity.npy` as a user runs it), gather, scatter, gausspsf, layered
+/// (classical baselines on the all-in-focus image + disparity), paper-aif and physical-aif
+/// (a preset on the same single layer), layered-gt, paper-gt and physical-gt (on the
+/// ground-truth layer stack). Every method uses the scene's K and focus from scene.json.
 ///
 /// Writes into REPORT: results.json and results.csv (per scene and method: PSNR, SSIM,
 /// MS-SSIM, time), summary.md (mean and standard deviation per method and per blur size),

@@ -99,6 +99,11 @@ pub struct MakeArgs {
     #[arg(long, default_value_t = trace::scene::STANDARD_SPP, value_name = "N")]
     pub spp: usize,
 
+    /// Range of the highlights' linear intensities, LO:HI (e.g. 2:10, the default, or 5:50):
+    /// the same scenes with brighter or dimmer highlights.
+    #[arg(long, value_name = "LO:HI")]
+    pub highlight_range: Option<String>,
+
     /// Make only the scenes with index % n == k.
     #[arg(long, value_name = "k/n")]
     pub shard: Option<String>,
@@ -241,9 +246,15 @@ fn run_make(a: &MakeArgs) -> Result<()> {
     }
     let width = format!("{}", a.scenes - 1).len().max(3);
     let dir_name = |i: usize| format!("scene_{i:0width$}");
+    let highlights = match &a.highlight_range {
+        Some(s) => trace::procedural::HighlightRange::parse(s)?,
+        None => Default::default(),
+    };
     // Every spec first: a bad parameter fails before anything is written.
     let specs = (0..a.scenes)
-        .map(|i| benchmark::scene_spec(a.seed, i, a.scenes, a.size, a.spp))
+        .map(|i| {
+            benchmark::scene_spec_with_highlights(a.seed, i, a.scenes, a.size, a.spp, highlights)
+        })
         .collect::<drbokeh::Result<Vec<_>>>()?;
     for s in &specs {
         s.validate()?;
@@ -269,6 +280,7 @@ fn run_make(a: &MakeArgs) -> Result<()> {
         "scenes": a.scenes,
         "size": a.size,
         "spp": a.spp,
+        "highlight_range": [highlights.lo, highlights.hi],
         "lens": {
             "model": "spherical",
             "curvature_radius_mm": benchmark::CURVATURE_RADIUS_MM,

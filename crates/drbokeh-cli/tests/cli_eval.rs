@@ -98,8 +98,9 @@ fn eval_and_gallery_write_their_reports() {
         .skip(1)
         .map(|s| s.split('"').next().unwrap())
         .collect();
-    // Inputs (2) + 3 focal planes x 6 image+disparity methods.
-    assert_eq!(srcs.len(), 2 + 3 * 6, "{html}");
+    // Inputs (2) + 3 focal planes x 8 image+disparity methods (2 photo pipelines, 4
+    // baselines, paper-aif, physical-aif).
+    assert_eq!(srcs.len(), 2 + 3 * 8, "{html}");
     for s in srcs {
         assert!(gal.join(s).is_file(), "missing {s}");
     }
@@ -186,4 +187,74 @@ fn bad_inputs_fail_with_clear_messages() {
         "{}",
         stderr(&o)
     );
+}
+
+/// The eval's photo rows are `drbokeh render --image aif.png --disparity disparity.npy`
+/// with the scene's K and focus: the same 8-bit PNG bytes, per preset, and a highlight
+/// setting other than the default changes them (so the comparison can fail).
+#[test]
+fn photo_rows_render_what_the_cli_renders() {
+    use drbokeh::eval::report::{render_method, Method, SceneInputs};
+    let tmp = tempfile::tempdir().unwrap();
+    let bench = tmp.path().join("bench");
+    let o = drbokeh(&[
+        "benchmark",
+        "make",
+        "--scenes",
+        "1",
+        "--size",
+        "48",
+        "--spp",
+        "16",
+        "--highlight-range",
+        "5:50",
+        "--quiet",
+        "--out",
+        bench.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dir = bench.join("scene_000");
+    let scene = SceneInputs::load(&dir).unwrap();
+    let (k, f) = (format!("{}", scene.blur_k), format!("{}", scene.focus));
+    let aif = dir.join("aif.png").to_str().unwrap().to_string();
+    let disparity = dir.join("disparity.npy").to_str().unwrap().to_string();
+    for (method, preset) in [
+        (Method::PhotoPhysical, "physical"),
+        (Method::PhotoPaper, "paper"),
+    ] {
+        let cli_png = tmp.path().join(format!("cli-{preset}.png"));
+        let cli = |extra: &[&str], out: &Path| {
+            let mut args = vec![
+                "render",
+                "--image",
+                &aif,
+                "--disparity",
+                &disparity,
+                "--blur",
+                &k,
+                "--focus",
+                &f,
+                "--preset",
+                preset,
+                "--quiet",
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            args.extend_from_slice(extra);
+            let o = drbokeh(&args);
+            assert!(o.status.success(), "{}", stderr(&o));
+            std::fs::read(out).unwrap()
+        };
+        let cli_bytes = cli(&[], &cli_png);
+        let lib = render_method(method, &scene).unwrap();
+        let lib_png = tmp.path().join(format!("lib-{preset}.png"));
+        drbokeh::io::write_output(&lib_png, &lib, drbokeh::io::BitDepth::Eight, |v| v).unwrap();
+        assert!(
+            std::fs::read(&lib_png).unwrap() == cli_bytes,
+            "{}: eval row and CLI render differ",
+            method.name()
+        );
+        let other = cli(&["--highlight", "off"], &tmp.path().join("off.png"));
+        assert!(other != cli_bytes, "--highlight off renders the same bytes");
+    }
 }

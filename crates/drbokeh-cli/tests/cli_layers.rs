@@ -118,7 +118,17 @@ fn render_decomposes_by_default_and_matches_the_layers_command() {
         "-q",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let camera = ["--focus", "0.0", "--blur", "10", "--window", "23", "-q"];
+    // Plain --highlight: the paper's boost for the photo (its default) and the stack alike.
+    let camera = [
+        "--focus",
+        "0.0",
+        "--blur",
+        "10",
+        "--window",
+        "23",
+        "--highlight",
+        "-q",
+    ];
     let render = |scene: &[&str], name: &str| -> Vec<f32> {
         let out = s.dir.path().join(name);
         let mut args = vec!["render"];

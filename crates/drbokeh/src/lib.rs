@@ -23,6 +23,7 @@ pub mod dfd;
 pub mod engine;
 mod error;
 pub mod eval;
+pub mod highlight;
 pub mod image;
 pub mod io;
 pub mod layering;

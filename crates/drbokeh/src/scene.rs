@@ -26,6 +26,9 @@
 //!   [`crate::layering::layers_from_disparity`]); with a matte, the paper's two layers; or
 //!   one opaque layer on request ([`Layering::SingleLayer`]). Linear (EXR) colour is
 //!   display-encoded with the transfer the renderer will undo ([`read_display_image`]).
+//! - **Highlights.** A display-encoded photo's clipped highlights get the paper's boost by
+//!   default, or a per-region recovery before the decomposition
+//!   ([`View::photo_highlights`], docs/highlights.md).
 //!
 //! - **Budget.** The work a source implies (demo size, or the image's size from its header
 //!   times the layers its decomposition may make) is checked against the input budget
@@ -43,6 +46,7 @@ use crate::budget;
 use crate::camera::{Camera, Window, WindowCap};
 use crate::demo;
 use crate::engine::Engine;
+use crate::highlight::PhotoHighlights;
 use crate::image::{check_dimensions, Image};
 use crate::io::{self, DepthKind, DisparityOptions};
 use crate::layering::{self, LayeringOptions};
@@ -168,8 +172,12 @@ pub struct View {
     pub gamma: f64,
     /// Offset of the display encoding.
     pub offset: f64,
-    /// Highlight boost.
+    /// The paper's highlight boost inside the model (docs/model.md, M20).
     pub highlight: bool,
+    /// How a display-encoded photo's clipped highlights are treated ([`PhotoHighlights`],
+    /// docs/highlights.md): not at all, the paper's boost (the default), or recovery before
+    /// the photo becomes layers. Not applied to stacks, the demo or linear (EXR) images.
+    pub photo_highlights: PhotoHighlights,
     /// Aperture shape ([`parse_aperture`] reads the textual form).
     pub aperture: Aperture,
     /// Model preset.
@@ -177,9 +185,9 @@ pub struct View {
 }
 
 impl Default for View {
-    /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost, a
-    /// circular aperture and the `physical` preset (the CLI's and the Python module's
-    /// defaults).
+    /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost
+    /// except for photos ([`PhotoHighlights::default`]: the paper's boost), a circular
+    /// aperture and the `physical` preset (the CLI's and the Python module's defaults).
     fn default() -> Self {
         let cam = Camera::paper_default(0.5);
         View {
@@ -189,6 +197,7 @@ impl Default for View {
             gamma: cam.gamma,
             offset: cam.offset,
             highlight: cam.highlight,
+            photo_highlights: PhotoHighlights::default(),
             aperture: Aperture::Circle,
             preset: Preset::Physical,
         }
@@ -303,7 +312,8 @@ pub struct Scene<T> {
 /// [`Engine::Auto`]).
 pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Result<Scene<T>> {
     let demo_view;
-    let view = match (&source, view.focus) {
+    let photo_view;
+    let mut view = match (&source, view.focus) {
         (Source::Demo { .. }, Focus::Auto) => {
             demo_view = View {
                 focus: Focus::Disparity(demo::DEMO_FOCUS),
@@ -313,6 +323,7 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
         }
         _ => view,
     };
+    let is_photo = matches!(source, Source::PhotoFiles(_) | Source::Photo(_));
     let (stack, mut notes) = match source {
         Source::Stack(stack) => (stack, vec![]),
         Source::StackFile(path) => (io::read_stack(&path)?, vec![]),
@@ -321,11 +332,24 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
             budget::check_work("demo_size", width as u64, height as u64, demo::LAYERS)?;
             (demo::scene(width, height), vec![])
         }
-        Source::PhotoFiles(files) => photo_stack(read_photo(&files, &view.tone())?, view, engine)?,
+        Source::PhotoFiles(files) => {
+            let photo = read_photo(&files, &view.tone())?;
+            if io::is_linear(&files.image) {
+                photo_view = View {
+                    photo_highlights: PhotoHighlights::Off,
+                    ..view.clone()
+                };
+                view = &photo_view;
+            }
+            photo_stack(photo, view, engine)?
+        }
         Source::Photo(photo) => photo_stack(photo, view, engine)?,
     };
-    let (settings, note) = view.settings_for(&stack, engine)?;
+    let (mut settings, note) = view.settings_for(&stack, engine)?;
     notes.extend(note);
+    if is_photo && view.photo_highlights == PhotoHighlights::PaperBoost {
+        settings.camera.highlight = true;
+    }
     Ok(Scene {
         stack,
         settings,
@@ -333,8 +357,9 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
     })
 }
 
-/// The layer stack of a photo: the matte's two layers, one layer, or a decomposition for
-/// the focus and blur the view resolves to on the image as one layer.
+/// The layer stack of a photo: its highlights recovered (`view.highlight_recovery`), then
+/// the matte's two layers, one layer, or a decomposition for the focus and blur the view
+/// resolves to on the image as one layer.
 fn photo_stack<T: Real>(
     photo: Photo<T>,
     view: &View,
@@ -346,6 +371,22 @@ fn photo_stack<T: Real>(
         matte,
         layering,
     } = photo;
+    let rgb_encoded = match &view.photo_highlights {
+        PhotoHighlights::Recover(r) => {
+            // Focus and blur as they resolve on the image as one layer.
+            let probe = LayerStack::single(rgb_encoded.clone(), disparity.clone())?;
+            let (settings, _) = view.settings_for(&probe, engine)?;
+            let cam = &settings.camera;
+            r.apply(
+                &rgb_encoded,
+                &disparity,
+                cam.focus_disparity,
+                cam.blur_k,
+                &view.tone(),
+            )?
+        }
+        _ => rgb_encoded,
+    };
     if let Some(matte) = matte {
         let stack = layering::two_layers_from_matte(&rgb_encoded, &disparity, &matte)?;
         return Ok((stack, vec![]));

@@ -4,6 +4,7 @@ mod common;
 
 use common::random_stack;
 use drbokeh::camera::{WindowCap, MAX_AUTO_WINDOW_SIZE};
+use drbokeh::highlight::{HighlightRecovery, PhotoHighlights};
 use drbokeh::layering::{layers_from_disparity, LayeringOptions};
 use drbokeh::scene::{self, Focus, Layering, Photo, PhotoFiles, Source, View};
 use drbokeh::{Aperture, Engine, Error, Image, Layer, LayerStack, Preset};
@@ -42,6 +43,7 @@ fn a_stack_and_a_focus_value_resolve_to_the_views_settings() {
         gamma: 2.0,
         offset: 0.01,
         highlight: true,
+        photo_highlights: PhotoHighlights::Off,
         aperture: Aperture::Polygon {
             blades: 6,
             rotation_deg: 5.0,
@@ -268,4 +270,85 @@ fn errors_name_parameters_and_files() {
     let missing = dir.path().join("none.npz");
     let e = scene::resolve::<f32>(Source::StackFile(missing), &base, Engine::Fast).unwrap_err();
     assert!(e.to_string().contains("none.npz"), "{e}");
+}
+
+#[test]
+fn photo_highlights_apply_to_photos_only() {
+    // A grey photo, far half (disparity 0) defocused, near half (1) in focus, with a
+    // clipped 2x2 highlight in the far half.
+    let (w, h) = (24, 16);
+    let mut rgb = Image::<f32>::new(w, h, 3);
+    rgb.data.iter_mut().for_each(|v| *v = 0.3);
+    let mut disparity = Image::<f32>::new(w, h, 1);
+    for y in 0..h {
+        for x in w / 2..w {
+            disparity.data[y * w + x] = 1.0;
+        }
+    }
+    for (x, y) in [(3, 5), (4, 5), (3, 6), (4, 6)] {
+        for c in 0..3 {
+            rgb.data[3 * (y * w + x) + c] = 1.0;
+        }
+    }
+    let photo = |layering| {
+        Source::Photo(Photo {
+            rgb_encoded: rgb.clone(),
+            disparity: disparity.clone(),
+            matte: None,
+            layering,
+        })
+    };
+    let view = |photo_highlights| View {
+        focus: Focus::Disparity(1.0),
+        blur_k: 20.0,
+        photo_highlights,
+        ..View::default()
+    };
+    // Default: the paper's boost for a photo, not for a stack.
+    assert_eq!(
+        View::default().photo_highlights,
+        PhotoHighlights::PaperBoost
+    );
+    let s = scene::resolve(
+        photo(Layering::SingleLayer),
+        &view(PhotoHighlights::default()),
+        Engine::Fast,
+    )
+    .unwrap();
+    assert!(s.settings.camera.highlight);
+    assert_eq!(s.stack.layers[0].rgb_encoded, rgb);
+    let stack = LayerStack::single(rgb.clone(), disparity.clone()).unwrap();
+    let s = scene::resolve(
+        Source::Stack(stack),
+        &view(PhotoHighlights::default()),
+        Engine::Fast,
+    )
+    .unwrap();
+    assert!(!s.settings.camera.highlight);
+    // Off: nothing.
+    let s = scene::resolve(
+        photo(Layering::SingleLayer),
+        &view(PhotoHighlights::Off),
+        Engine::Fast,
+    )
+    .unwrap();
+    assert!(!s.settings.camera.highlight);
+    assert_eq!(s.stack.layers[0].rgb_encoded, rgb);
+    // Recovery: the defocused clipped blob gets the gain in linear light, the rest is kept.
+    let r = HighlightRecovery {
+        gain: 3.0,
+        threshold: 0.9,
+    };
+    let s = scene::resolve(
+        photo(Layering::SingleLayer),
+        &view(PhotoHighlights::Recover(r)),
+        Engine::Fast,
+    )
+    .unwrap();
+    assert!(!s.settings.camera.highlight);
+    let got = &s.stack.layers[0].rgb_encoded;
+    let tone = view(PhotoHighlights::Off).tone();
+    let lin = tone.linearize(got.data[3 * (5 * w + 3)] as f64);
+    assert!((lin - 3.0).abs() < 1e-4, "{lin}");
+    assert_eq!(got.data[0], 0.3);
 }

@@ -26,6 +26,22 @@ pub fn report_html(report: &Report) -> String {
         xml_escape(&report.benchmark),
         report.scene_count
     );
+    let headline = super::tables::headline_cells(report);
+    if let Some((_, first)) = headline.first() {
+        s.push_str("<h2>Headline: the photo pipeline</h2>\n<p>What <code>drbokeh render --image --disparity</code> gives with the scene's K and focus (default highlights, decomposition into layers): mean PSNR (dB) and its gain over naive scatter. The one-layer and true-layer rows of the summary are ablations.</p>\n<table id=\"headline\"><thead><tr><th>method</th>");
+        for (title, _) in first {
+            let _ = write!(s, "<th>PSNR {}</th>", xml_escape(title));
+        }
+        s.push_str("</tr></thead><tbody>\n");
+        for (name, cells) in &headline {
+            let _ = write!(s, "<tr><td>{}</td>", xml_escape(name));
+            for (_, c) in cells {
+                let _ = write!(s, "<td>{}</td>", xml_escape(c));
+            }
+            s.push_str("</tr>\n");
+        }
+        s.push_str("</tbody></table>\n");
+    }
     s.push_str("<h2>Summary (mean ± sample std over scenes; click a column to sort)</h2>\n<table class=\"sortable\" id=\"summary\"><thead><tr><th>method</th><th>input</th><th>PSNR (dB)</th><th>SSIM</th><th>MS-SSIM</th><th>time (s)</th></tr></thead><tbody>\n");
     for r in &report.summary.overall {
         let m = report.methods.iter().find(|m| m.name == r.method);

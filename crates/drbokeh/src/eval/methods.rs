@@ -6,6 +6,7 @@ use super::baselines::Baseline;
 use crate::camera::Camera;
 use crate::image::Image;
 use crate::presets::{Preset, RenderSettings};
+use crate::scene::{self, Focus, Layering, Photo, Source, View};
 use crate::stack::LayerStack;
 use crate::{Engine, Error, NoProgress, Result};
 use serde::Serialize;
@@ -31,6 +32,12 @@ pub enum Method {
     PhysicalAif,
     /// The `physical` preset on the ground-truth layer stack.
     PhysicalGt,
+    /// The photo pipeline as `drbokeh render --image --disparity` runs it with the `paper`
+    /// preset: highlights at their default ([`crate::highlight::PhotoHighlights`]),
+    /// decomposition into layers, render.
+    PhotoPaper,
+    /// The photo pipeline with the `physical` preset (the CLI's default render of a photo).
+    PhotoPhysical,
 }
 
 /// What a method is fed.
@@ -56,7 +63,9 @@ impl MethodInput {
 
 impl Method {
     /// All methods, in report order.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 11] = [
+        Method::PhotoPhysical,
+        Method::PhotoPaper,
         Method::Gather,
         Method::Scatter,
         Method::GaussPsf,
@@ -80,6 +89,8 @@ impl Method {
             Method::PaperGt => "paper-gt",
             Method::PhysicalAif => "physical-aif",
             Method::PhysicalGt => "physical-gt",
+            Method::PhotoPaper => "photo-paper",
+            Method::PhotoPhysical => "photo-physical",
         }
     }
 
@@ -103,6 +114,8 @@ impl Method {
             Method::PaperGt => "Dr.Bokeh paper preset on the ground-truth layers",
             Method::PhysicalAif => "drbokeh physical preset on one opaque layer (image + disparity)",
             Method::PhysicalGt => "drbokeh physical preset on the ground-truth layers",
+            Method::PhotoPaper => "the photo pipeline as the CLI runs it (default highlight treatment, decomposition into layers) with the paper preset",
+            Method::PhotoPhysical => "the photo pipeline as the CLI runs it (default highlight treatment, decomposition into layers) with the physical preset: what a user gets from `drbokeh render --image --disparity`",
         }
     }
 
@@ -155,6 +168,9 @@ pub enum Renderer {
     Baseline(Baseline),
     /// A drbokeh preset on the fast engine ([`render_preset`]).
     Preset(Preset),
+    /// The photo pipeline ([`crate::scene::resolve`] of a photo, then the fast engine)
+    /// with a preset ([`render_photo_pipeline`]).
+    PhotoPipeline(Preset),
 }
 
 impl Method {
@@ -167,6 +183,8 @@ impl Method {
             Method::Layered | Method::LayeredGt => Renderer::Baseline(Baseline::LayeredDisc),
             Method::PaperAif | Method::PaperGt => Renderer::Preset(Preset::Paper),
             Method::PhysicalAif | Method::PhysicalGt => Renderer::Preset(Preset::Physical),
+            Method::PhotoPaper => Renderer::PhotoPipeline(Preset::Paper),
+            Method::PhotoPhysical => Renderer::PhotoPipeline(Preset::Physical),
         }
     }
 
@@ -177,6 +195,25 @@ impl Method {
         let mut out = match self.renderer() {
             Renderer::Baseline(b) => b.render(stack, camera)?,
             Renderer::Preset(p) => render_preset(p, stack, camera)?,
+            Renderer::PhotoPipeline(p) => {
+                let [layer] = stack.layers.as_slice() else {
+                    return Err(Error::param(
+                        "methods",
+                        format!(
+                            "method '{}' needs an image + disparity (one layer), got {} layers",
+                            self.name(),
+                            stack.layers.len()
+                        ),
+                    ));
+                };
+                let photo = Photo {
+                    rgb_encoded: layer.rgb_encoded.clone(),
+                    disparity: layer.disparity.clone(),
+                    matte: None,
+                    layering: Layering::default(),
+                };
+                render_photo_pipeline(p, Source::Photo(photo), camera, photo_view_defaults())?
+            }
         };
         out.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
         Ok(out)
@@ -211,6 +248,34 @@ pub fn render_photo(
         &LayerStack::single(image.clone(), disparity.clone())?,
         camera,
     )
+}
+
+/// The view options of the photo rows that the camera does not carry: the CLI's defaults
+/// (highlights at their default, [`crate::highlight::PhotoHighlights::default`]).
+pub fn photo_view_defaults() -> View {
+    View::default()
+}
+
+/// Renders a photo `source` as the CLI does with `base`'s options (highlights, aperture) and the camera's focus, K, gamma and offset, the automatic window and the
+/// fast engine: [`crate::scene::resolve`], then [`crate::render`]. Display-encoded, not
+/// clipped.
+pub fn render_photo_pipeline(
+    preset: Preset,
+    source: Source<f32>,
+    camera: &Camera,
+    base: View,
+) -> Result<Image<f32>> {
+    let view = View {
+        focus: Focus::Disparity(camera.focus_disparity),
+        blur_k: camera.blur_k,
+        window: None,
+        gamma: camera.gamma,
+        offset: camera.offset,
+        preset,
+        ..base
+    };
+    let scene = scene::resolve::<f32>(source, &view, Engine::Fast)?;
+    crate::render(&scene.stack, &scene.settings, Engine::Fast, &NoProgress)
 }
 
 /// The `paper` preset with `camera`, fast engine.

@@ -33,7 +33,8 @@ pub use super::images::{
     write_scene_images, ERROR_MAP_FULL_SCALE,
 };
 pub use super::methods::{
-    render_paper, render_photo, render_preset, Method, MethodInput, Renderer,
+    photo_view_defaults, render_paper, render_photo, render_photo_pipeline, render_preset, Method,
+    MethodInput, Renderer,
 };
 pub use super::plots::{metric_plot_svg, plot_files, MetricAccessor};
 pub use super::run::{evaluate_benchmark, evaluate_scene, render_method};

@@ -6,6 +6,8 @@ use super::methods::Method;
 use super::scenes::{list_scenes, SceneInputs};
 use super::scoring::{score, SceneResult};
 use super::summary::{bucket_of, Report};
+use crate::io::DepthKind;
+use crate::scene::{PhotoFiles, Source};
 use crate::{Progress, Result};
 use std::path::Path;
 use std::time::Instant;
@@ -14,6 +16,22 @@ use std::time::Instant;
 /// display-encoded result, clipped to [0, 1].
 pub fn render_method(method: Method, scene: &SceneInputs) -> Result<crate::Image<f32>> {
     let cam = scene.camera();
+    if let super::methods::Renderer::PhotoPipeline(preset) = method.renderer() {
+        // Exactly as `drbokeh render --image aif.png --disparity disparity.npy` reads them.
+        let files = PhotoFiles::new(
+            scene.dir.join("aif.png"),
+            scene.dir.join("disparity.npy"),
+            DepthKind::Disparity,
+        );
+        let mut out = super::methods::render_photo_pipeline(
+            preset,
+            Source::PhotoFiles(files),
+            &cam,
+            super::methods::photo_view_defaults(),
+        )?;
+        out.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+        return Ok(out);
+    }
     match method.input() {
         super::methods::MethodInput::AifDisparity => {
             super::methods::render_photo(method, &scene.aif, &scene.disparity, &cam)

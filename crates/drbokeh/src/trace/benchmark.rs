@@ -17,7 +17,7 @@
 //! - Largest paraxial circle of confusion: 4 to 40 px (at 512 px wide), log-spaced over
 //!   the 100 scenes in a scrambled order; smaller images scale it with their width.
 
-use super::procedural::ProceduralKind;
+use super::procedural::{HighlightRange, ProceduralKind};
 use super::sampling::Rng;
 use super::scene::{
     BillboardSpec, CameraSpec, LensSpec, RenderSpec, SceneSpec, TextureSpec, STANDARD_AIF_SPP,
@@ -43,7 +43,7 @@ pub fn focus_target(index: usize) -> &'static str {
 }
 
 /// The spec of benchmark scene `index` (of `count`) for master `seed`, `size` x `size`
-/// pixels, `spp` samples per pixel.
+/// pixels, `spp` samples per pixel, highlights in the default range.
 pub fn scene_spec(
     seed: u64,
     index: usize,
@@ -51,6 +51,23 @@ pub fn scene_spec(
     size: usize,
     spp: usize,
 ) -> Result<SceneSpec> {
+    scene_spec_with_highlights(seed, index, count, size, spp, HighlightRange::default())
+}
+
+/// [`scene_spec`] with the highlights' linear gains drawn from `highlights`: the same
+/// geometry, focus, blur and content for every range (only the highlights' brightness
+/// changes). The default range is not written into the spec, so standard scenes keep
+/// their `scene.json`.
+pub fn scene_spec_with_highlights(
+    seed: u64,
+    index: usize,
+    count: usize,
+    size: usize,
+    spp: usize,
+    highlights: HighlightRange,
+) -> Result<SceneSpec> {
+    highlights.validate()?;
+    let highlight_range = (highlights != HighlightRange::default()).then_some(highlights);
     let mut rng = Rng::from_words(&[seed, index as u64, 0xBE4C]);
     let lens_f =
         super::SphericalLens::new(CURVATURE_RADIUS_MM, RIM_RADIUS_MM, ETA)?.focal_length_mm();
@@ -133,6 +150,7 @@ pub fn scene_spec(
             texture: TextureSpec::Procedural {
                 kind,
                 seed: rng.next_u64() >> 11,
+                highlight_range,
             },
         });
     }
@@ -209,5 +227,43 @@ mod tests {
             blurs.push(r);
         }
         assert!(blurs.iter().any(|&r| r < 6.0) && blurs.iter().any(|&r| r > 30.0));
+    }
+
+    #[test]
+    fn highlight_range_changes_only_the_highlights() {
+        let std = scene_spec(5, 7, 20, 64, 16).unwrap();
+        let dflt = scene_spec_with_highlights(5, 7, 20, 64, 16, HighlightRange::default()).unwrap();
+        assert_eq!(std, dflt);
+        let bright = HighlightRange { lo: 5.0, hi: 50.0 };
+        let b = scene_spec_with_highlights(5, 7, 20, 64, 16, bright).unwrap();
+        assert_ne!(std, b);
+        for (x, y) in std.billboards.iter().zip(&b.billboards) {
+            assert_eq!(
+                (x.depth_mm, x.center, x.size),
+                (y.depth_mm, y.center, y.size)
+            );
+            match &y.texture {
+                TextureSpec::Procedural {
+                    highlight_range, ..
+                } => assert_eq!(*highlight_range, Some(bright)),
+                t => panic!("unexpected texture {t:?}"),
+            }
+        }
+        // The brighter range paints brighter highlights at the same places.
+        let kind = ProceduralKind::Background;
+        let t0 = super::super::procedural::generate(kind, 3, 96, 96);
+        let t1 = super::super::procedural::generate_with_highlights(kind, 3, 96, 96, bright);
+        let peak =
+            |t: &super::super::texture::Texture| t.data.iter().map(|p| p[0]).fold(0.0f32, f32::max);
+        assert!(
+            peak(&t1) > peak(&t0) * 1.5,
+            "{} vs {}",
+            peak(&t1),
+            peak(&t0)
+        );
+        assert!(HighlightRange::parse("5:50").unwrap() == bright);
+        assert!(HighlightRange::parse("50:5").is_err());
+        assert!(HighlightRange::parse("0:5").is_err());
+        assert!(HighlightRange::parse("x").is_err());
     }
 }

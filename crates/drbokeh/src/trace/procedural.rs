@@ -1,8 +1,8 @@
 //! Procedural billboard content, deterministic from a seed (no downloaded data).
 //!
 //! - [`ProceduralKind::Background`]: an opaque textured backdrop (gradient, value noise,
-//!   panels with lit windows) with many small bright highlights (linear values 2 to 10)
-//!   that turn into bokeh balls.
+//!   panels with lit windows) with many small bright highlights (linear values drawn
+//!   uniformly from a [`HighlightRange`], by default 2 to 10) that turn into bokeh balls.
 //! - [`ProceduralKind::Foliage`]: leaves with soft edges, holes and thin stems, dew-drop
 //!   highlights.
 //! - [`ProceduralKind::Strands`]: hair- or grass-like fine strands with partial coverage.
@@ -87,15 +87,65 @@ fn segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
     ((p.0 - a.0 - t * vx).powi(2) + (p.1 - a.1 - t * vy).powi(2)).sqrt()
 }
 
+/// The range of linear intensities (gains on a near-white tint) of the small bright
+/// highlights painted on every kind of content; drawn uniformly in `[lo, hi]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HighlightRange {
+    /// Smallest gain.
+    pub lo: f64,
+    /// Largest gain.
+    pub hi: f64,
+}
+
+impl Default for HighlightRange {
+    /// 2 to 10: the benchmark's standard range.
+    fn default() -> Self {
+        HighlightRange { lo: 2.0, hi: 10.0 }
+    }
+}
+
+impl HighlightRange {
+    /// Checks `0 < lo <= hi <= 10000` (finite); the message names `highlight_range`.
+    pub fn validate(&self) -> crate::Result<()> {
+        let HighlightRange { lo, hi } = *self;
+        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi <= 10_000.0) {
+            return Err(crate::Error::param(
+                "highlight_range",
+                format!("expected 0 < LO <= HI <= 10000, got {lo}:{hi}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Parses `LO:HI` (e.g. `2:10`, `5:50`).
+    pub fn parse(s: &str) -> crate::Result<Self> {
+        let bad = || {
+            crate::Error::param(
+                "highlight_range",
+                format!("expected LO:HI with 0 < LO <= HI (e.g. 2:10), got '{s}'"),
+            )
+        };
+        let (lo, hi) = s.split_once(':').ok_or_else(bad)?;
+        let r = HighlightRange {
+            lo: lo.trim().parse().map_err(|_| bad())?,
+            hi: hi.trim().parse().map_err(|_| bad())?,
+        };
+        r.validate()?;
+        Ok(r)
+    }
+}
+
 /// A texture being painted, in texel coordinates.
 struct Canvas {
     tex: Texture,
+    highlights: HighlightRange,
 }
 
 impl Canvas {
-    fn new(w: usize, h: usize) -> Self {
+    fn new(w: usize, h: usize, highlights: HighlightRange) -> Self {
         Canvas {
             tex: Texture::transparent(w, h),
+            highlights,
         }
     }
 
@@ -147,7 +197,7 @@ impl Canvas {
                 }
             }
             let r = (s * rng.range(0.002, 0.007)).max(0.7);
-            let gain = rng.range(2.0, 10.0);
+            let gain = rng.range(self.highlights.lo, self.highlights.hi);
             let tint = if warm && rng.uniform() < 0.6 {
                 [1.0, 0.75, 0.45]
             } else if rng.uniform() < 0.3 {
@@ -171,10 +221,23 @@ fn random_colour(rng: &mut Rng, lo: f64, hi: f64) -> [f64; 3] {
     [rng.range(lo, hi), rng.range(lo, hi), rng.range(lo, hi)]
 }
 
-/// Generates `kind` at `width x height` texels from `seed`.
+/// Generates `kind` at `width x height` texels from `seed`, highlights in the default
+/// range.
 pub fn generate(kind: ProceduralKind, seed: u64, width: usize, height: usize) -> Texture {
+    generate_with_highlights(kind, seed, width, height, HighlightRange::default())
+}
+
+/// Generates `kind` at `width x height` texels from `seed`, with highlight gains drawn
+/// from `highlights` (the same layout and random draws whatever the range).
+pub fn generate_with_highlights(
+    kind: ProceduralKind,
+    seed: u64,
+    width: usize,
+    height: usize,
+    highlights: HighlightRange,
+) -> Texture {
     let mut rng = Rng::from_words(&[seed, kind as u64, 0x7E47]);
-    let mut canvas = Canvas::new(width.max(1), height.max(1));
+    let mut canvas = Canvas::new(width.max(1), height.max(1), highlights);
     match kind {
         ProceduralKind::Background => background(&mut canvas, &mut rng, seed),
         ProceduralKind::Foliage => foliage(&mut canvas, &mut rng, seed),

@@ -39,7 +39,7 @@
 //!   the pinhole passes, a perfect square) and `render.seed` are optional.
 
 use super::optics::{LensModel, Optics, SphericalLens};
-use super::procedural::{self, ProceduralKind};
+use super::procedural::{self, HighlightRange, ProceduralKind};
 use super::sampling::strata_side;
 use super::texture::{decode_display, Texture};
 use crate::{Error, Result};
@@ -165,6 +165,9 @@ pub enum TextureSpec {
         kind: ProceduralKind,
         /// Its seed.
         seed: u64,
+        /// Range of the highlights' linear gains (default 2 to 10).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        highlight_range: Option<HighlightRange>,
     },
 }
 
@@ -370,6 +373,10 @@ impl SceneSpec {
                         return Err(Error::param(format!("{what}.texture.gain"), "must be >= 0"));
                     }
                 }
+                TextureSpec::Procedural {
+                    highlight_range: Some(r),
+                    ..
+                } => r.validate()?,
                 TextureSpec::Procedural { .. } => {}
             }
         }
@@ -441,9 +448,17 @@ impl SceneSpec {
                 TextureSpec::Solid { color, alpha, gain } => {
                     Texture::solid(color.map(|c| decode_display(c) * gain), *alpha)
                 }
-                TextureSpec::Procedural { kind, seed } => {
-                    procedural::generate(*kind, *seed, tw, th)
-                }
+                TextureSpec::Procedural {
+                    kind,
+                    seed,
+                    highlight_range,
+                } => procedural::generate_with_highlights(
+                    *kind,
+                    *seed,
+                    tw,
+                    th,
+                    highlight_range.unwrap_or_default(),
+                ),
             };
             billboards.push(Billboard::place(
                 &optics,
