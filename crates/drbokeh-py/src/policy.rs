@@ -70,6 +70,8 @@ impl ViewArgs<'_> {
             highlight: self.highlight,
             aperture: aperture_from(aperture)?,
             preset: self.preset.parse().or_raise()?,
+            // A photo's highlights as the CLI treats them by default (docs/highlights.md).
+            ..View::default()
         })
     }
 }
