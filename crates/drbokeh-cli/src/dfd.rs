@@ -3,77 +3,172 @@
 use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use drbokeh::dfd::benchmark::{self, DfdBenchmarkConfig, DfdLayer, LossCombo, SceneGroup};
 use drbokeh::dfd::experiment::{markdown_table, paper_combos, run_experiment, synthetic_pair};
-use drbokeh::dfd::{estimate_disparity, DfdOptions, LossWeights, RenderLayer};
-use drbokeh::{io, Progress, RenderSettings};
-use std::path::PathBuf;
+use drbokeh::dfd::{
+    estimate_disparity, report, DfdOptions, Highlights, Init, LossWeights, Optimiser,
+    Parameterisation, RenderLayer,
+};
+use drbokeh::{io, Preset, Progress, RenderSettings};
+use std::path::{Path, PathBuf};
 
-/// Camera and optimiser options shared by `dfd` and `dfd-eval`.
+/// Optimiser options shared by `dfd` and `dfd-eval`.
 #[derive(Args, Debug, Clone)]
 pub struct OptimiserArgs {
-    /// Rendering layer to optimise through: drbokeh, gausspsf or aperture.
-    #[arg(long, default_value = "drbokeh")]
-    pub layer: String,
-    /// Adam iterations per scale.
-    #[arg(long, default_value_t = 200)]
-    pub iterations: usize,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 0.02)]
-    pub lr: f64,
-    /// Coarse-to-fine scales (1 = full resolution only).
-    #[arg(long, default_value_t = 2)]
+    /// Coarse-to-fine scales (each halves the pair and K). 0: as many as keep the smaller
+    /// side at least 32 pixels.
+    #[arg(long, default_value_t = 0, value_name = "N")]
     pub scales: usize,
+    /// Finest scale optimised (0 = full resolution; the result is upsampled from it).
+    /// Default: the finest whose iteration stays under a cost budget (pixels x disc area
+    /// of the largest blur <= 6e7), so large or very blurred pairs stop at a coarser scale.
+    #[arg(long, value_name = "S")]
+    pub finest_scale: Option<usize>,
+    /// Most Adam iterations at each coarse scale.
+    #[arg(long, default_value_t = 150, value_name = "N")]
+    pub iterations: usize,
+    /// Most Adam iterations at the finest scale optimised (the expensive one).
+    #[arg(long, default_value_t = 30, value_name = "N")]
+    pub fine_iterations: usize,
+    /// Stop a scale after this many iterations without a 0.1 % lower loss (0: never).
+    #[arg(long, default_value_t = 15, value_name = "N")]
+    pub patience: usize,
+    /// Learning rate at the coarsest scale (in units of the parameterisation's variable).
+    #[arg(long, default_value_t = 0.1)]
+    pub lr: f64,
+    /// Factor on the learning rate at each finer scale.
+    #[arg(long, default_value_t = 0.7, value_name = "F")]
+    pub lr_decay: f64,
+    /// How disparity stays in [0, 1]: sigmoid (of an unbounded variable) or clamped.
+    #[arg(long = "param", default_value = "sigmoid", value_name = "P")]
+    pub parameterisation: String,
+    /// Optimiser: adam (per-pixel step sizes) or shared-adam (one step scale for the map:
+    /// pixels the pair says little about move little).
+    #[arg(long, default_value = "adam", value_name = "OPT")]
+    pub optimiser: String,
+    /// Pixels clipped (white) in the all-in-focus image: model (optimise their true
+    /// brightness with the disparity), mask (leave every pixel they can reach out of the
+    /// loss) or ignore.
+    #[arg(long, default_value = "model", value_name = "MODE")]
+    pub highlights: String,
+    /// Initial disparity: a number in [0, 1] (everywhere), or sweepN (the best of N
+    /// constant disparities per pixel at the coarsest scale).
+    #[arg(long, default_value = "0.5", value_name = "INIT")]
+    pub init: String,
     /// Gamma of the display encoding.
     #[arg(long, default_value_t = 2.2)]
     pub gamma: f64,
+    /// Engine of the drbokeh layer's render and gradient: fast (default; gradients within
+    /// 1e-5 of the exact ones' largest value), threaded (every window tap, the exact
+    /// gradient) or reference.
+    #[arg(long, default_value = "fast", value_name = "ENGINE")]
+    pub engine: String,
 }
 
-/// Recover a disparity map from an (all-in-focus, defocused) pair by optimising through a
-/// differentiable renderer (Adam on L = 0.5 L1 + 0.5 G + 10 HSSIM by default).
+impl OptimiserArgs {
+    /// Applies these options to `o`.
+    fn apply(&self, o: &mut DfdOptions) -> Result<()> {
+        o.schedule.scales = self.scales;
+        o.schedule.finest_scale = self.finest_scale;
+        o.schedule.iterations = self.iterations;
+        o.schedule.fine_iterations = self.fine_iterations;
+        o.schedule.patience = self.patience;
+        o.schedule.learning_rate = self.lr;
+        o.schedule.learning_rate_decay = self.lr_decay;
+        o.parameterisation = self.parameterisation.parse::<Parameterisation>()?;
+        o.optimiser = self.optimiser.parse::<Optimiser>()?;
+        o.highlights = self.highlights.parse::<Highlights>()?;
+        o.init = parse_init(&self.init)?;
+        o.settings.camera.gamma = self.gamma;
+        o.engine = self.engine.parse()?;
+        o.validate()?;
+        Ok(())
+    }
+}
+
+fn parse_init(s: &str) -> Result<Init> {
+    if let Some(n) = s.strip_prefix("sweep") {
+        let n: usize = n
+            .parse()
+            .with_context(|| format!("invalid parameter --init: '{s}' (use sweepN, e.g. sweep9)"))?;
+        return Ok(Init::Sweep(n));
+    }
+    let v: f64 = s.parse().with_context(|| {
+        format!("invalid parameter --init: '{s}' (a disparity in [0, 1] or sweepN)")
+    })?;
+    Ok(Init::Constant(v))
+}
+
+/// Recover a disparity map from an (all-in-focus, defocused) pair of the same view by
+/// optimising it through a differentiable renderer until the render of the all-in-focus
+/// image matches the defocused one (supplement sec. 3.2).
 ///
-/// Example:
-///   drbokeh dfd --all-in-focus aif.png --defocused blurred.png --focus 1 --blur 10 --output disp.png
+/// You need the camera of the defocused image: its focus disparity and blur strength K
+/// (blur radius in pixels per unit of disparity; `drbokeh benchmark make` writes both to
+/// scene.json as "focus" and "blur"). Depth is only recoverable where the pair shows it:
+/// textured regions that the blur changes. The sign of disparity - focus is not: with the
+/// focus inside the scene, a pixel as far in front of it as another is behind blurs the
+/// same. Focus on the nearest (focus 1) or the farthest (focus 0) object if you can.
+///
+/// Loss: 0.5 L1 + 0.5 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
+/// coarse to fine; clipped highlights of the all-in-focus image are modelled; pixels the
+/// defocused image clips are left out. Writes the disparity (near = 1), a confidence map
+/// (where the pair carries depth information), a preview and a JSON log of every
+/// iteration and the time per scale.
+///
+/// Example (a benchmark scene):
+///   drbokeh dfd --all-in-focus scene_003/aif.png --defocused scene_003/bokeh.png \
+///       --focus 1 --blur 8.98 --output disp.png
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct DfdArgs {
-    /// All-in-focus image.
+    /// All-in-focus image (PNG, JPEG, TIFF; display-encoded).
     #[arg(long, value_name = "IMAGE")]
     pub all_in_focus: PathBuf,
-    /// Defocused image of the same view.
+    /// Defocused image of the same view, same size.
     #[arg(long, value_name = "IMAGE")]
     pub defocused: PathBuf,
-    /// Focus disparity of the defocused image, in [0, 1].
+    /// Focus disparity of the defocused image, in [0, 1] (1 = nearest).
     #[arg(long)]
     pub focus: f64,
-    /// Blur strength K of the defocused image.
+    /// Blur strength K of the defocused image (pixels of blur radius per unit disparity).
     #[arg(long = "blur", value_name = "K")]
     pub blur_k: f64,
+    /// Model preset of the drbokeh layer: physical (default; measured closer to a real
+    /// lens, docs/physical.md) or paper (the published model).
+    #[arg(long, default_value = "physical", value_name = "NAME")]
+    pub preset: String,
+    /// Rendering layer to optimise through: drbokeh (default), gausspsf or aperture.
+    #[arg(long, default_value = "drbokeh")]
+    pub layer: String,
     /// Loss terms, comma-separated: l1, smooth, hssim, ssim (a single 11-window SSIM).
     #[arg(long, default_value = "l1,smooth,hssim")]
     pub losses: String,
+    /// Start from this disparity map (same size; PNG/NPY/EXR/TIFF, near = 1) instead of
+    /// --init.
+    #[arg(long, value_name = "FILE")]
+    pub initial_disparity: Option<PathBuf>,
     #[command(flatten)]
     pub opt: OptimiserArgs,
     /// Output disparity: .png (16-bit), .npy (float32) or .exr.
     #[arg(long, short, value_name = "FILE")]
     pub output: PathBuf,
-    /// JSON log of the loss curve (default: OUTPUT with .log.json).
+    /// Confidence map, in [0, 1] (default: OUTPUT with .confidence.png).
+    #[arg(long, value_name = "FILE")]
+    pub confidence: Option<PathBuf>,
+    /// JSON log: options, loss terms per iteration, time per scale (default: OUTPUT with
+    /// .log.json).
     #[arg(long, value_name = "FILE")]
     pub log: Option<PathBuf>,
     /// Preview PNG of the disparity (default: OUTPUT with .preview.png).
     #[arg(long, value_name = "FILE")]
     pub preview: Option<PathBuf>,
-    /// Engine of the drbokeh layer's render and gradient. auto (default) and fast: the fast
-    /// engine (only the taps that can contribute; gradients within 1e-5 of the exact ones'
-    /// largest value). threaded: every window tap, the exact gradient. reference: the
-    /// threaded adjoint.
-    #[arg(long, default_value = "auto", value_name = "ENGINE")]
-    pub engine: String,
-    /// No progress bar.
+    /// No progress bar or summary.
     #[arg(long, short)]
     pub quiet: bool,
 }
 
-fn with_suffix(p: &std::path::Path, suffix: &str) -> PathBuf {
+fn with_suffix(p: &Path, suffix: &str) -> PathBuf {
     let stem = p
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -81,44 +176,87 @@ fn with_suffix(p: &std::path::Path, suffix: &str) -> PathBuf {
     p.with_file_name(format!("{stem}{suffix}"))
 }
 
-fn options(opt: &OptimiserArgs, focus: f64, blur_k: f64) -> Result<DfdOptions> {
-    let mut settings = RenderSettings::paper(focus);
-    settings.camera.blur_k = blur_k;
-    settings.camera.gamma = opt.gamma;
-    settings.validate()?;
-    let layer: RenderLayer = opt.layer.parse()?;
-    let mut o = DfdOptions::new(settings, layer);
-    if opt.iterations == 0 || opt.iterations > 100_000 {
-        bail!("invalid parameter --iterations: must be between 1 and 100000");
+fn extension(p: &Path) -> String {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
+}
+
+/// Fails unless `path`'s directory exists and `path` is none of `inputs`.
+fn check_output(path: &Path, inputs: &[&Path]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !dir.is_dir() {
+        bail!("{}: output directory does not exist", path.display());
     }
-    o.iterations = opt.iterations;
-    o.learning_rate = opt.lr;
-    o.scales = opt.scales;
-    Ok(o)
+    let canon = |p: &Path| -> Option<PathBuf> {
+        let parent = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(parent.canonicalize().ok()?.join(p.file_name()?))
+    };
+    let out = canon(path);
+    for i in inputs {
+        if out.is_some() && canon(i) == out {
+            bail!("{}: output would overwrite an input", path.display());
+        }
+    }
+    Ok(())
 }
 
 pub fn run(a: &DfdArgs) -> Result<()> {
-    let ext = a
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    if !["png", "npy", "exr"].contains(&ext.as_str()) {
+    if !["png", "npy", "exr"].contains(&extension(&a.output).as_str()) {
         bail!(
             "{}: unsupported output extension (use .png, .npy or .exr)",
             a.output.display()
         );
     }
-    let mut o = options(&a.opt, a.focus, a.blur_k)?;
-    // dfd computes in f32: auto is the fast engine (as for render).
-    o.engine = match a.engine.as_str() {
-        "auto" => drbokeh::Engine::Fast,
-        other => other.parse()?,
-    };
+    let log_path = a
+        .log
+        .clone()
+        .unwrap_or_else(|| with_suffix(&a.output, ".log.json"));
+    let preview = a
+        .preview
+        .clone()
+        .unwrap_or_else(|| with_suffix(&a.output, ".preview.png"));
+    let confidence = a
+        .confidence
+        .clone()
+        .unwrap_or_else(|| with_suffix(&a.output, ".confidence.png"));
+    if extension(&preview) != "png" {
+        bail!("{}: the preview must be a .png", preview.display());
+    }
+    if !["png", "npy", "exr"].contains(&extension(&confidence).as_str()) {
+        bail!(
+            "{}: unsupported confidence extension (use .png, .npy or .exr)",
+            confidence.display()
+        );
+    }
+    let mut inputs = vec![a.all_in_focus.as_path(), a.defocused.as_path()];
+    if let Some(i) = &a.initial_disparity {
+        inputs.push(i.as_path());
+    }
+    let outputs = [&a.output, &log_path, &preview, &confidence];
+    for (i, o) in outputs.iter().enumerate() {
+        check_output(o, &inputs)?;
+        if outputs[..i].contains(o) {
+            bail!("{}: two outputs share this path", o.display());
+        }
+    }
+
+    let mut settings = RenderSettings::physical(a.focus);
+    settings.preset = a.preset.parse::<Preset>()?;
+    settings.camera.blur_k = a.blur_k;
+    let mut o = DfdOptions::new(settings, a.layer.parse::<RenderLayer>()?);
     let (weights, terms) = LossWeights::from_terms(&a.losses)?;
     o.weights = weights;
     o.terms = terms;
+    a.opt.apply(&mut o)?;
+
     let aif = io::read_rgb::<f32>(&a.all_in_focus)?;
     let target = io::read_rgb::<f32>(&a.defocused)?;
     if (aif.width, aif.height) != (target.width, target.height) {
@@ -132,47 +270,64 @@ pub fn run(a: &DfdArgs) -> Result<()> {
             aif.height
         );
     }
+    if let Some(path) = &a.initial_disparity {
+        let d: drbokeh::Image<f32> = io::read_grey(path, "initial disparity")?;
+        if (d.width, d.height) != (aif.width, aif.height) {
+            bail!(
+                "{}: size {}x{} does not match {} ({}x{})",
+                path.display(),
+                d.width,
+                d.height,
+                a.all_in_focus.display(),
+                aif.width,
+                aif.height
+            );
+        }
+        if d.data.iter().any(|v| !v.is_finite() || *v < 0.0 || *v > 1.0) {
+            bail!("{}: disparity values must be finite and in [0, 1]", path.display());
+        }
+        o.initial_disparity = Some(d);
+    }
     let bar = Bar::new("dfd", a.quiet);
-    bar.start((o.iterations * o.scales) as u64);
-    let (disp, log) = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
+    let n_scales = o.schedule.scales_for(aif.width, aif.height) as u64;
+    bar.start(o.schedule.iterations as u64 * n_scales.saturating_sub(1) + o.schedule.fine_iterations as u64);
+    let result = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
     bar.finish();
-    io::write_grey(&a.output, &disp)?;
-    let log_path = a
-        .log
-        .clone()
-        .unwrap_or_else(|| with_suffix(&a.output, ".log.json"));
-    let preview = a
-        .preview
-        .clone()
-        .unwrap_or_else(|| with_suffix(&a.output, ".preview.png"));
-    let json = serde_json::to_vec_pretty(&serde_json::json!({
-        "layer": o.layer.name(),
-        "weights": o.weights,
-        "terms": o.terms,
-        "iterations_per_scale": o.iterations,
-        "learning_rate": o.learning_rate,
-        "scales": o.scales,
-        "focus": a.focus,
-        "blur": a.blur_k,
-        "log": log,
-    }))?;
+
+    let json = serde_json::to_vec_pretty(&result.log)?;
+    let rgb = drbokeh::Image::from_vec(
+        result.disparity.width,
+        result.disparity.height,
+        3,
+        result.disparity.data.iter().flat_map(|&v| [v; 3]).collect(),
+    )?;
+    io::write_grey(&a.output, &result.disparity)?;
+    io::write_grey(&confidence, &result.confidence)?;
+    io::write_output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
     io::write_atomic(&log_path, |w| {
         use std::io::Write;
         w.write_all(&json)
             .map_err(|e| drbokeh::Error::file(&log_path, e.to_string()))
     })?;
-    let rgb = drbokeh::Image::from_vec(
-        disp.width,
-        disp.height,
-        3,
-        disp.data.iter().flat_map(|&v| [v; 3]).collect(),
-    )?;
-    io::write_output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
     if !a.quiet {
-        let last = log.last().map(|e| e.loss).unwrap_or(f64::NAN);
+        let last = result.log.entries.last().map(|e| e.loss).unwrap_or(f64::NAN);
+        let scales: Vec<String> = result
+            .log
+            .scales
+            .iter()
+            .map(|s| {
+                format!(
+                    "{}x{}: {} it, {:.3} s/it",
+                    s.width, s.height, s.iterations, s.seconds_per_iteration
+                )
+            })
+            .collect();
         eprintln!(
-            "drbokeh: disparity -> {} (final loss {last:.5}; log {}, preview {})",
+            "drbokeh: disparity -> {} in {:.1} s (final loss {last:.5}; {}); confidence {}, log {}, preview {}",
             a.output.display(),
+            result.log.seconds,
+            scales.join(", "),
+            confidence.display(),
             log_path.display(),
             preview.display()
         );
@@ -180,33 +335,68 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     Ok(())
 }
 
-/// Depth-from-defocus experiment on synthetic pairs rendered by the `paper` preset from a
-/// known disparity: disparity MAE, RMSE and fraction within 1.25x for each rendering layer
-/// and each loss combination (L1+G, L1+G+SSIM, L1+G+HSSIM).
+/// Depth-from-defocus experiments: rendering layers x loss combinations (L1+G, L1+G+SSIM,
+/// L1+G+HSSIM), scored against the true disparity.
 ///
-/// Example:
-///   drbokeh dfd-eval --pairs 4 --size 64 --out report/
+/// --benchmark DIR: ray-traced pairs made by `drbokeh benchmark make` (aif.png, bokeh.png,
+/// scene.json's K and focus; truth disparity.npy). Rows: drbokeh with preset physical and
+/// paper, GaussPSF and aperture compositing, each with the three loss combinations, and the
+/// constant guess (the median of the true disparity). Per scene and per group: MAE, RMSE,
+/// delta < 1.25 (metric depth ratio), MAE inside and outside the foreground masks, MAE
+/// where the run is confident. Scenes whose focus lies inside their depth range (the sign
+/// of disparity - focus is ambiguous) are reported apart. Writes results.json, results.md,
+/// index.html (estimates beside the truth) and scenes/<scene>/*.png.
+///
+/// --synthetic: pairs rendered by our own renderer from a known disparity (the sanity
+/// check: the renderer recovers what it rendered).
+///
+/// Examples:
+///   drbokeh benchmark make --scenes 24 --seed 201 --size 256 --spp 256 --out bench
+///   drbokeh dfd-eval --benchmark bench --groups determined --out report/
+///   drbokeh dfd-eval --synthetic --pairs 4 --size 64 --out report/
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct DfdEvalArgs {
-    /// Number of synthetic pairs.
+    /// Ray-traced benchmark directory.
+    #[arg(long, value_name = "DIR", conflicts_with = "synthetic", required_unless_present = "synthetic")]
+    pub benchmark: Option<PathBuf>,
+    /// Synthetic pairs rendered by our renderer instead.
+    #[arg(long)]
+    pub synthetic: bool,
+    /// Benchmark: rendering layers, comma-separated (physical, paper, gausspsf, aperture)
+    /// or all. Synthetic: drbokeh, gausspsf, aperture.
+    #[arg(long, value_name = "LIST")]
+    pub layers: Option<String>,
+    /// Loss combinations, comma-separated: l1g (L1+G), ssim (L1+G+SSIM), hssim
+    /// (L1+G+HSSIM), or all.
+    #[arg(long, default_value = "all", value_name = "LIST")]
+    pub losses: String,
+    /// Benchmark: scene groups to run, comma-separated: determined (near or far focus,
+    /// largest CoC >= 6 px), small (near or far focus, smaller blur), ambiguous (focus
+    /// inside the depth range), or all.
+    #[arg(long, default_value = "all", value_name = "LIST")]
+    pub groups: String,
+    /// Benchmark: at most this many scenes (after the group filter).
+    #[arg(long, value_name = "N")]
+    pub limit: Option<usize>,
+    /// Synthetic: number of pairs.
     #[arg(long, default_value_t = 4)]
     pub pairs: usize,
-    /// Side of each square pair, in pixels (at least 64 for HSSIM at two scales).
+    /// Synthetic: side of each square pair, in pixels.
     #[arg(long, default_value_t = 64)]
     pub size: usize,
-    /// Seed of the first pair.
+    /// Synthetic: seed of the first pair.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Blur strength K of the pairs.
+    /// Synthetic: blur strength K of the pairs.
     #[arg(long = "blur", value_name = "K", default_value_t = 10.0)]
     pub blur_k: f64,
-    /// Layers to evaluate, comma-separated (default: all three).
-    #[arg(long, default_value = "drbokeh,gausspsf,aperture")]
-    pub layers: String,
+    /// Synthetic: preset that renders the pairs and that the drbokeh layer optimises with.
+    #[arg(long, default_value = "physical", value_name = "NAME")]
+    pub preset: String,
     #[command(flatten)]
     pub opt: OptimiserArgs,
-    /// Output directory (results.json, results.md).
+    /// Output directory.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// No progress bar.
@@ -214,7 +404,76 @@ pub struct DfdEvalArgs {
     pub quiet: bool,
 }
 
+fn parse_groups(list: &str) -> Result<Vec<SceneGroup>> {
+    if list.trim() == "all" {
+        return Ok(SceneGroup::ALL.to_vec());
+    }
+    list.split(',')
+        .map(|g| match g.trim() {
+            "determined" => Ok(SceneGroup::Determined),
+            "small" => Ok(SceneGroup::DeterminedSmallBlur),
+            "ambiguous" => Ok(SceneGroup::SignAmbiguous),
+            other => bail!(
+                "invalid parameter --groups: unknown group '{other}' (determined, small, ambiguous or all)"
+            ),
+        })
+        .collect()
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    io::write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(bytes)
+            .map_err(|e| drbokeh::Error::file(path, e.to_string()))
+    })?;
+    Ok(())
+}
+
 pub fn run_eval(a: &DfdEvalArgs) -> Result<()> {
+    match &a.benchmark {
+        Some(dir) => run_benchmark(a, dir),
+        None => run_synthetic(a),
+    }
+}
+
+fn create_out(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("{}: cannot create directory", out.display()))
+}
+
+fn run_benchmark(a: &DfdEvalArgs, dir: &Path) -> Result<()> {
+    let layers = DfdLayer::parse_list(a.layers.as_deref().unwrap_or("all"))?;
+    let losses = LossCombo::parse_list(&a.losses)?;
+    let groups = parse_groups(&a.groups)?;
+    if a.limit == Some(0) {
+        bail!("invalid parameter --limit: must be at least 1");
+    }
+    let mut template = DfdOptions::new(RenderSettings::physical(1.0), RenderLayer::DrBokeh);
+    a.opt.apply(&mut template)?;
+    let config = DfdBenchmarkConfig {
+        benchmark: dir.to_path_buf(),
+        layers,
+        losses,
+        template,
+        groups,
+        limit: a.limit,
+    };
+    // Load (and so check) every selected scene before creating anything.
+    benchmark::select_scenes(&config)?;
+    create_out(&a.out)?;
+    let bar = Bar::new("dfd-eval", a.quiet);
+    let scenes_dir = a.out.join("scenes");
+    let report = benchmark::evaluate(&config, &bar, &mut |pictures| {
+        report::write_scene_pictures(&scenes_dir.join(&pictures.0.inputs.name), pictures)
+    })?;
+    bar.finish();
+    let methods = benchmark::methods(&config);
+    report::write_report(&a.out, &report, &methods)?;
+    print!("{}", report::results_markdown(&report));
+    Ok(())
+}
+
+fn run_synthetic(a: &DfdEvalArgs) -> Result<()> {
     if a.pairs == 0 || a.pairs > 1000 {
         bail!("invalid parameter --pairs: must be between 1 and 1000");
     }
@@ -223,38 +482,40 @@ pub fn run_eval(a: &DfdEvalArgs) -> Result<()> {
     }
     let layers = a
         .layers
+        .as_deref()
+        .unwrap_or("drbokeh,gausspsf,aperture")
         .split(',')
         .map(|s| s.trim().parse::<RenderLayer>())
         .collect::<Result<Vec<_>, _>>()?;
-    let template = options(&a.opt, 1.0, a.blur_k)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("{}: cannot create directory", a.out.display()))?;
+    let mut settings = RenderSettings::physical(1.0);
+    settings.preset = a.preset.parse::<Preset>()?;
+    settings.camera.blur_k = a.blur_k;
+    let mut template = DfdOptions::new(settings, RenderLayer::DrBokeh);
+    a.opt.apply(&mut template)?;
+    let combos: Vec<_> = {
+        let wanted = LossCombo::parse_list(&a.losses)?;
+        paper_combos()
+            .into_iter()
+            .filter(|c| wanted.iter().any(|w| w.name() == c.name))
+            .collect()
+    };
     let pairs = (0..a.pairs)
         .map(|i| synthetic_pair::<f32>(a.seed + i as u64, a.size, &template.settings))
         .collect::<Result<Vec<_>, _>>()?;
-    let combos = paper_combos();
+    create_out(&a.out)?;
     let bar = Bar::new("dfd-eval", a.quiet);
     bar.start((layers.len() * combos.len() * pairs.len()) as u64);
     let rows = run_experiment(&pairs, &layers, &combos, &template, &mut |_| bar.advance(1))?;
     bar.finish();
     let table = markdown_table(&rows);
-    let md = a.out.join("results.md");
-    let json_path = a.out.join("results.json");
     let json = serde_json::to_vec_pretty(&serde_json::json!({
         "pairs": a.pairs, "size": a.size, "seed": a.seed, "blur": a.blur_k, "focus": 1.0,
-        "iterations_per_scale": template.iterations, "scales": template.scales, "learning_rate": template.learning_rate,
+        "preset": template.settings.preset.name(),
+        "options": drbokeh::dfd::RunOptions::of(&template),
         "rows": rows,
     }))?;
-    io::write_atomic(&json_path, |w| {
-        use std::io::Write;
-        w.write_all(&json)
-            .map_err(|e| drbokeh::Error::file(&json_path, e.to_string()))
-    })?;
-    io::write_atomic(&md, |w| {
-        use std::io::Write;
-        w.write_all(table.as_bytes())
-            .map_err(|e| drbokeh::Error::file(&md, e.to_string()))
-    })?;
+    write_file(&a.out.join("results.json"), &json)?;
+    write_file(&a.out.join("results.md"), table.as_bytes())?;
     print!("{table}");
     Ok(())
 }

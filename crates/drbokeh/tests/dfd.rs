@@ -88,10 +88,11 @@ fn dfd_recovers_a_known_disparity() {
     s.camera.blur_k = 10.0;
     let pair = synthetic_pair::<f32>(1, 64, &s).unwrap();
     let mut o = DfdOptions::new(s, RenderLayer::DrBokeh);
-    o.iterations = 150;
-    o.scales = 2;
-    let (est, log) =
-        estimate_disparity(&pair.all_in_focus, &pair.defocused, &o, &mut |_| {}).unwrap();
+    o.schedule.iterations = 150;
+    o.schedule.fine_iterations = 150;
+    o.schedule.scales = 2;
+    let r = estimate_disparity(&pair.all_in_focus, &pair.defocused, &o, &mut |_| {}).unwrap();
+    let (est, log) = (r.disparity, r.log.entries);
     let start = disparity_errors(
         &Image::from_vec(64, 64, 1, vec![0.5f32; 64 * 64]).unwrap(),
         &pair.disparity,

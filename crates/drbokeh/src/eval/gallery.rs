@@ -159,7 +159,7 @@ fn render_one(
     disp: &Image<f32>,
     cam: &Camera,
 ) -> Result<Image<f32>> {
-    use super::baselines::{self, Baseline};
+    use crate::baselines::{self, Baseline};
     let stack = || crate::LayerStack::single(img.clone(), disp.clone());
     let mut out = match method {
         Method::Gather => baselines::naive_gather(img, disp, cam)?,

@@ -3,7 +3,7 @@
 //!
 //! Methods ([`Method`]) and their inputs (each scene directory provides them):
 //! - on the all-in-focus image `aif.png` + `disparity.npy`: the baselines `gather`,
-//!   `scatter`, `layered`, `gausspsf` ([`super::baselines`]) and `paper-aif` (the `paper`
+//!   `scatter`, `layered`, `gausspsf` ([`crate::baselines`]) and `paper-aif` (the `paper`
 //!   preset on a single opaque layer);
 //! - on the ground-truth layer stack `layers.npz`: `layered-gt` (the layered baseline) and
 //!   `paper-gt` (the `paper` preset); `physical-aif` and `physical-gt`, the `physical` preset on
@@ -21,7 +21,7 @@
 //! metric (`psnr_vs_blur.svg`, ...) and `index.html` (see `docs/evaluation.md` for the
 //! schema); [`write_scene_images`] writes the pictures the gallery shows.
 
-use super::baselines::{self, Baseline};
+use crate::baselines::{self, Baseline};
 use super::metrics;
 use crate::camera::{Camera, Window, AUTO_WINDOW_MARGIN_PX, MAX_WINDOW_SIZE};
 use crate::image::Image;

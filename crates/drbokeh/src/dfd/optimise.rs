@@ -1,0 +1,717 @@
+//! The coarse-to-fine Adam loop of [`estimate_disparity`].
+
+use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
+use super::objective::{structure_min_side, ImageObjective, SMOOTHNESS_MIN_SIDE};
+use super::{
+    render_layer_on, render_layer_vjp_on, DfdOptions, DfdResult, Highlights, Init, Optimiser,
+    Parameterisation, CONFIDENCE_HALF_SENSITIVITY,
+};
+use crate::camera::Window;
+use crate::image::Image;
+use crate::loss;
+use crate::model::Tone;
+use crate::{Error, Real, Result};
+use std::time::Instant;
+
+/// An encoded value at or above this counts as clipped (at white).
+pub(super) const CLIP_LEVEL: f64 = 0.999;
+/// Encoded values above this are high dynamic range input, not clipped.
+const HDR_LEVEL: f64 = 1.0 + 1e-6;
+/// Largest brightness gain of a clipped highlight (linear), as `ln`.
+const MAX_LOG_GAIN: f64 = 4.6; // 100x white
+/// Adam learning rate of the highlights' log gains.
+const GAIN_LEARNING_RATE: f64 = 0.1;
+/// Disparity step of the confidence map's finite difference.
+const CONFIDENCE_STEP: f64 = 0.02;
+/// Half-size of the confidence map's box (5x5).
+const CONFIDENCE_RADIUS: usize = 2;
+/// Half-size of the plane sweep's comparison box (5x5).
+const SWEEP_RADIUS: usize = 2;
+
+/// Adam state for a vector of parameters.
+struct Adam {
+    m: Vec<f64>,
+    v: Vec<f64>,
+    t: i32,
+}
+
+impl Adam {
+    fn new(n: usize) -> Self {
+        Adam {
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            t: 0,
+        }
+    }
+
+    /// One step of the chosen optimiser.
+    fn step_with(&mut self, kind: Optimiser, params: &mut [f64], grad: &[f64], lr: f64) {
+        match kind {
+            Optimiser::Adam => self.step(params, grad, lr),
+            Optimiser::SharedAdam => self.step_shared(params, grad, lr),
+        }
+    }
+
+    /// Adam with one second moment (the mean squared gradient) for all parameters; steps
+    /// capped at `3 lr`.
+    fn step_shared(&mut self, params: &mut [f64], grad: &[f64], lr: f64) {
+        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-12);
+        self.t += 1;
+        let (c1, c2) = (1.0 - b1.powi(self.t), 1.0 - b2.powi(self.t));
+        let ms = grad.iter().map(|g| g * g).sum::<f64>() / grad.len().max(1) as f64;
+        self.v[0] = b2 * self.v[0] + (1.0 - b2) * ms;
+        let denom = (self.v[0] / c2).sqrt() + eps;
+        for i in 0..params.len() {
+            self.m[i] = b1 * self.m[i] + (1.0 - b1) * grad[i];
+            let step = lr * (self.m[i] / c1) / denom;
+            params[i] -= step.clamp(-3.0 * lr, 3.0 * lr);
+        }
+    }
+
+    /// One step of `lr` on `params` along `grad`.
+    fn step(&mut self, params: &mut [f64], grad: &[f64], lr: f64) {
+        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
+        self.t += 1;
+        let (c1, c2) = (1.0 - b1.powi(self.t), 1.0 - b2.powi(self.t));
+        for i in 0..params.len() {
+            let g = grad[i];
+            self.m[i] = b1 * self.m[i] + (1.0 - b1) * g;
+            self.v[i] = b2 * self.v[i] + (1.0 - b2) * g * g;
+            params[i] -= lr * (self.m[i] / c1) / ((self.v[i] / c2).sqrt() + eps);
+        }
+    }
+}
+
+fn sigmoid(u: f64) -> f64 {
+    1.0 / (1.0 + (-u).exp())
+}
+
+fn logit(d: f64) -> f64 {
+    let d = d.clamp(1e-4, 1.0 - 1e-4);
+    (d / (1.0 - d)).ln()
+}
+
+impl Parameterisation {
+    fn to_disparity(self, p: f64) -> f64 {
+        match self {
+            Parameterisation::Clamped => p,
+            Parameterisation::Sigmoid => sigmoid(p),
+        }
+    }
+    fn from_disparity(self, d: f64) -> f64 {
+        match self {
+            Parameterisation::Clamped => d.clamp(0.0, 1.0),
+            Parameterisation::Sigmoid => logit(d),
+        }
+    }
+    /// d disparity / d parameter.
+    fn derivative(self, p: f64) -> f64 {
+        match self {
+            Parameterisation::Clamped => 1.0,
+            Parameterisation::Sigmoid => {
+                let s = sigmoid(p);
+                s * (1.0 - s)
+            }
+        }
+    }
+    fn after_step(self, p: &mut [f64]) {
+        if self == Parameterisation::Clamped {
+            p.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+        }
+    }
+}
+
+/// 2x2 average pooling of a per-pixel vector (`ch` values per pixel), dropping an odd last
+/// row or column (as [`loss::pyramid::avg_pool2`]).
+fn pool(data: &[f64], w: usize, h: usize, ch: usize) -> Vec<f64> {
+    let (pw, ph) = (w / 2, h / 2);
+    let mut out = vec![0.0; pw * ph * ch];
+    for y in 0..ph {
+        for x in 0..pw {
+            for c in 0..ch {
+                let at = |xx: usize, yy: usize| data[(yy * w + xx) * ch + c];
+                out[(y * pw + x) * ch + c] = 0.25
+                    * (at(2 * x, 2 * y)
+                        + at(2 * x + 1, 2 * y)
+                        + at(2 * x, 2 * y + 1)
+                        + at(2 * x + 1, 2 * y + 1));
+            }
+        }
+    }
+    out
+}
+
+/// The adjoint of [`pool`]: spreads a pooled gradient back onto `w x h`.
+fn pool_adjoint(grad: &[f64], w: usize, h: usize, ch: usize) -> Vec<f64> {
+    let (pw, ph) = (w / 2, h / 2);
+    let mut out = vec![0.0; w * h * ch];
+    for y in 0..ph {
+        for x in 0..pw {
+            for c in 0..ch {
+                let g = 0.25 * grad[(y * pw + x) * ch + c];
+                for (xx, yy) in [
+                    (2 * x, 2 * y),
+                    (2 * x + 1, 2 * y),
+                    (2 * x, 2 * y + 1),
+                    (2 * x + 1, 2 * y + 1),
+                ] {
+                    out[(yy * w + xx) * ch + c] += g;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Bilinear upsampling of a one-channel map from `sw x sh` to `w x h` (pixel centres
+/// aligned as for 2x pooling: fine pixel `x` sits at coarse `(x + 0.5) / 2 - 0.5`).
+fn upsample(data: &[f64], sw: usize, sh: usize, w: usize, h: usize) -> Vec<f64> {
+    let mut out = vec![0.0; w * h];
+    let (fx_scale, fy_scale) = (sw as f64 / w as f64, sh as f64 / h as f64);
+    for y in 0..h {
+        let fy = ((y as f64 + 0.5) * fy_scale - 0.5).clamp(0.0, (sh - 1) as f64);
+        let (y0, ty) = (fy.floor() as usize, fy - fy.floor());
+        let y1 = (y0 + 1).min(sh - 1);
+        for x in 0..w {
+            let fx = ((x as f64 + 0.5) * fx_scale - 0.5).clamp(0.0, (sw - 1) as f64);
+            let (x0, tx) = (fx.floor() as usize, fx - fx.floor());
+            let x1 = (x0 + 1).min(sw - 1);
+            out[y * w + x] = (1.0 - ty)
+                * ((1.0 - tx) * data[y0 * sw + x0] + tx * data[y0 * sw + x1])
+                + ty * ((1.0 - tx) * data[y1 * sw + x0] + tx * data[y1 * sw + x1]);
+        }
+    }
+    out
+}
+
+/// Mean over a `(2r+1)^2` box (clamped to the image) of a one-channel map.
+fn box_mean(data: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
+    let mut out = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (mut s, mut n) = (0.0, 0.0);
+            for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                    s += data[yy * w + xx];
+                    n += 1.0;
+                }
+            }
+            out[y * w + x] = s / n;
+        }
+    }
+    out
+}
+
+fn to_image<T: Real>(data: &[f64], w: usize, h: usize, ch: usize) -> Image<T> {
+    Image {
+        width: w,
+        height: h,
+        channels: ch,
+        data: data.iter().map(|&v| T::c(v)).collect(),
+    }
+}
+
+/// Linear values to an encoded image.
+fn encode_image<T: Real>(lin: &[f64], w: usize, h: usize, tone: &Tone) -> Image<T> {
+    Image {
+        width: w,
+        height: h,
+        channels: 3,
+        data: lin.iter().map(|&v| T::c(tone.encode(v.max(0.0)))).collect(),
+    }
+}
+
+/// One scale of the pyramid.
+struct Level {
+    width: usize,
+    height: usize,
+    /// Target, encoded.
+    target: Vec<f64>,
+    /// Pixels left out of the loss.
+    excluded: Vec<bool>,
+}
+
+/// Marks every pixel within `radius` of a pixel where `seed` holds.
+fn dilate(seed: &[bool], w: usize, h: usize, radius: f64) -> Vec<bool> {
+    let r = radius.ceil() as isize;
+    let mut out = vec![false; w * h];
+    let offsets: Vec<(isize, isize)> = (-r..=r)
+        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+        .filter(|&(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius * radius)
+        .collect();
+    for y in 0..h as isize {
+        for x in 0..w as isize {
+            if !seed[y as usize * w + x as usize] {
+                continue;
+            }
+            for &(dx, dy) in &offsets {
+                let (xx, yy) = (x + dx, y + dy);
+                if xx >= 0 && yy >= 0 && xx < w as isize && yy < h as isize {
+                    out[yy as usize * w + xx as usize] = true;
+                }
+            }
+        }
+    }
+    out
+}
+
+fn check_inputs<T: Real>(all_in_focus: &Image<T>, defocused: &Image<T>) -> Result<()> {
+    for (what, img) in [("all-in-focus image", all_in_focus), ("defocused image", defocused)] {
+        if img.channels != 3 || img.data.len() != img.width * img.height * 3 {
+            return Err(Error::input(what, "must be an RGB image (3 channels)"));
+        }
+        img.check_finite(what)?;
+        if img.data.iter().any(|v| v.f64() < 0.0) {
+            return Err(Error::input(what, "has negative values"));
+        }
+    }
+    if (all_in_focus.width, all_in_focus.height) != (defocused.width, defocused.height) {
+        return Err(Error::input(
+            "depth from defocus",
+            format!(
+                "all-in-focus image is {}x{} but the defocused image is {}x{}",
+                all_in_focus.width, all_in_focus.height, defocused.width, defocused.height
+            ),
+        ));
+    }
+    if all_in_focus.width < 8 || all_in_focus.height < 8 {
+        return Err(Error::input(
+            "depth from defocus",
+            format!(
+                "{}x{} is too small (at least 8x8)",
+                all_in_focus.width, all_in_focus.height
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Estimates disparity from an all-in-focus image and a defocused image (both HxWx3,
+/// display-encoded, the same view) with the camera of `options.settings` (see the
+/// [module documentation](super)). `on_iteration` sees each log entry as it is made (for
+/// progress).
+pub fn estimate_disparity<T: Real>(
+    all_in_focus: &Image<T>,
+    defocused: &Image<T>,
+    options: &DfdOptions,
+    on_iteration: &mut dyn FnMut(&LogEntry),
+) -> Result<DfdResult<T>> {
+    let started = Instant::now();
+    check_inputs(all_in_focus, defocused)?;
+    options.validate()?;
+    let (w, h) = (all_in_focus.width, all_in_focus.height);
+    if let Some(map) = &options.initial_disparity {
+        if (map.width, map.height, map.channels) != (w, h, 1) || map.data.len() != w * h {
+            return Err(Error::input(
+                "initial disparity",
+                format!(
+                    "is {}x{}x{}, but the pair is {w}x{h} (one channel expected)",
+                    map.width, map.height, map.channels
+                ),
+            ));
+        }
+        map.check_finite("initial disparity")?;
+    }
+    let tone = options.settings.tone();
+    let cam = &options.settings.camera;
+    let (k_full, focus) = (cam.blur_k, cam.focus_disparity);
+    let max_rel = focus.max(1.0 - focus);
+
+    // Clipped pixels: aif channels at white (highlights whose brightness is lost), target
+    // pixels at white (the sensor clipped them: left out).
+    let aif_clipped: Vec<bool> = all_in_focus
+        .data
+        .iter()
+        .map(|v| (CLIP_LEVEL..=HDR_LEVEL).contains(&v.f64()))
+        .collect();
+    let target_clipped: Vec<bool> = defocused
+        .data
+        .chunks_exact(3)
+        .map(|p| p.iter().any(|v| v.f64() >= CLIP_LEVEL))
+        .collect();
+    let mut excluded = target_clipped.clone();
+    if options.highlights == Highlights::Mask {
+        let seed: Vec<bool> = aif_clipped.chunks_exact(3).map(|c| c.iter().any(|&b| b)).collect();
+        let reach = dilate(&seed, w, h, k_full * max_rel + 2.0);
+        for (e, r) in excluded.iter_mut().zip(&reach) {
+            *e |= *r;
+        }
+    }
+    let masked_fraction = excluded.iter().filter(|&&e| e).count() as f64 / (w * h) as f64;
+
+    let param = options.parameterisation;
+    let sched = options.schedule;
+    // Pyramid, pooled in linear light.
+    let n_scales = options.schedule.scales_for(w, h);
+    let aif_lin: Vec<f64> = all_in_focus
+        .data
+        .iter()
+        .map(|v| tone.linearize(v.f64()))
+        .collect();
+    let target_lin: Vec<f64> = defocused
+        .data
+        .iter()
+        .map(|v| tone.linearize(v.f64()))
+        .collect();
+    let mut levels = vec![Level {
+        width: w,
+        height: h,
+        target: defocused.data.iter().map(|v| v.f64()).collect(),
+        excluded: excluded.clone(),
+    }];
+    let (mut lin_t, mut excl) = (target_lin, excluded);
+    while levels.len() < n_scales {
+        let last = levels.last().expect("one level");
+        let (lw, lh) = (last.width, last.height);
+        if lw < 16 || lh < 16 {
+            break;
+        }
+        let next_t = pool(&lin_t, lw, lh, 3);
+        let (pw, ph) = (lw / 2, lh / 2);
+        let next_e: Vec<bool> = (0..pw * ph)
+            .map(|i| {
+                let (x, y) = (i % pw, i / pw);
+                excl[2 * y * lw + 2 * x]
+                    || excl[2 * y * lw + 2 * x + 1]
+                    || excl[(2 * y + 1) * lw + 2 * x]
+                    || excl[(2 * y + 1) * lw + 2 * x + 1]
+            })
+            .collect();
+        levels.push(Level {
+            width: pw,
+            height: ph,
+            target: next_t.iter().map(|&v| tone.encode(v.max(0.0))).collect(),
+            excluded: next_e.clone(),
+        });
+        lin_t = next_t;
+        excl = next_e;
+    }
+    let n_scales = levels.len();
+    let finest = sched.finest_for(w, h, k_full * max_rel, n_scales);
+
+    // Highlight gains (log, >= 0) on the clipped aif channels.
+    let model_highlights = options.highlights == Highlights::Model;
+    let clipped_idx: Vec<usize> = (0..aif_clipped.len()).filter(|&i| aif_clipped[i]).collect();
+    let mut log_gain = vec![0.0f64; clipped_idx.len()];
+    let mut gain_adam = Adam::new(clipped_idx.len());
+    // The aif at scale `s` (linear), with the current gains.
+    let aif_at = |s: usize, log_gain: &[f64]| -> Vec<f64> {
+        let mut lin = aif_lin.clone();
+        for (&i, &g) in clipped_idx.iter().zip(log_gain) {
+            lin[i] *= g.exp();
+        }
+        let (mut lw, mut lh) = (w, h);
+        for _ in 0..s {
+            lin = pool(&lin, lw, lh, 3);
+            lw /= 2;
+            lh /= 2;
+        }
+        lin
+    };
+
+    let mut entries = Vec::new();
+    let mut scale_logs = Vec::new();
+    let mut current: Option<(Vec<f64>, usize, usize)> = None; // disparity at the last scale
+    for scale in (finest..n_scales).rev() {
+        let t_scale = Instant::now();
+        let level = &levels[scale];
+        let (lw, lh) = (level.width, level.height);
+        let mut settings = options.settings.clone();
+        settings.camera.blur_k = k_full / (1u64 << scale) as f64;
+        settings.camera.window = Window::auto_unclipped(settings.camera.blur_k * max_rel + 1.0);
+        let target: Image<T> = to_image(&level.target, lw, lh, 3);
+        let min_side = lw.min(lh);
+        let objective = ImageObjective {
+            weights: options.weights,
+            terms: options.terms,
+            use_structure: min_side >= structure_min_side(options.terms),
+            target: &target,
+            excluded: &level.excluded,
+        };
+        let use_smooth = options.weights.smoothness > 0.0 && min_side >= SMOOTHNESS_MIN_SIDE;
+
+        // Starting disparity of this scale.
+        let start: Vec<f64> = match (&current, &options.initial_disparity) {
+            (Some((d, sw, sh)), _) => upsample(d, *sw, *sh, lw, lh),
+            (None, Some(map)) => {
+                let mut d: Vec<f64> = map.data.iter().map(|&v| (v as f64).clamp(0.0, 1.0)).collect();
+                let (mut mw, mut mh) = (w, h);
+                for _ in 0..scale {
+                    d = pool(&d, mw, mh, 1);
+                    mw /= 2;
+                    mh /= 2;
+                }
+                d
+            }
+            (None, None) => match options.init {
+                Init::Constant(v) => vec![v; lw * lh],
+                Init::Sweep(n) => {
+                    let aif: Image<T> = encode_image(&aif_at(scale, &log_gain), lw, lh, &tone);
+                    sweep(options, &settings, &aif, &target, &level.excluded, n)?
+                }
+            },
+        };
+        let mut p: Vec<f64> = start.iter().map(|&d| param.from_disparity(d)).collect();
+        let mut adam = Adam::new(p.len());
+        let lr = sched.learning_rate
+            * sched
+                .learning_rate_decay
+                .powi((n_scales - 1 - scale) as i32);
+        let max_iters = if scale == finest {
+            sched.fine_iterations
+        } else {
+            sched.iterations
+        };
+        let (mut best, mut best_at) = (f64::INFINITY, 0usize);
+        let mut iterations = 0;
+        let mut plateau = false;
+        let mut last_loss = f64::NAN;
+        for it in 0..max_iters {
+            let disp: Vec<f64> = p.iter().map(|&v| param.to_disparity(v)).collect();
+            let disp_img: Image<T> = to_image(&disp, lw, lh, 1);
+            let aif_lin_s = aif_at(scale, &log_gain);
+            let aif: Image<T> = encode_image(&aif_lin_s, lw, lh, &tone);
+            let mut entry = LogEntry {
+                scale,
+                iteration: it,
+                loss: 0.0,
+                l1: None,
+                smoothness: None,
+                structure: None,
+            };
+            let vjp = render_layer_vjp_on(
+                options.layer,
+                options.engine,
+                &aif,
+                &disp_img,
+                &settings,
+                model_highlights && !clipped_idx.is_empty(),
+                |render: &Image<T>| objective.evaluate(render, &mut entry),
+            )?;
+            let mut grad: Vec<f64> = vjp.d_disparity.data.iter().map(|v| v.f64()).collect();
+            if use_smooth {
+                let (val, gs) = loss::edge_aware_smoothness_grad(&disp_img, &aif)?;
+                entry.smoothness = Some(val.f64());
+                entry.loss += options.weights.smoothness * val.f64();
+                for (a, b) in grad.iter_mut().zip(&gs.data) {
+                    *a += options.weights.smoothness * b.f64();
+                }
+            }
+            for (g, &v) in grad.iter_mut().zip(&p) {
+                *g *= param.derivative(v);
+            }
+            // Highlight gains: encoded-colour gradient -> linear at this scale -> full
+            // resolution -> log gain.
+            if let Some(d_rgb) = &vjp.d_rgb {
+                let mut g_lin: Vec<f64> = d_rgb
+                    .data
+                    .iter()
+                    .zip(&aif_lin_s)
+                    .map(|(g, &l)| g.f64() * tone.encode_derivative(l.max(1e-12)))
+                    .collect();
+                let mut sizes = vec![(w, h)];
+                for _ in 0..scale {
+                    let (a, b) = *sizes.last().expect("one size");
+                    sizes.push((a / 2, b / 2));
+                }
+                for s in (0..scale).rev() {
+                    let (a, b) = sizes[s];
+                    g_lin = pool_adjoint(&g_lin, a, b, 3);
+                }
+                let g_gain: Vec<f64> = clipped_idx
+                    .iter()
+                    .zip(&log_gain)
+                    .map(|(&i, &u)| g_lin[i] * aif_lin[i] * u.exp())
+                    .collect();
+                gain_adam.step(&mut log_gain, &g_gain, GAIN_LEARNING_RATE);
+                log_gain
+                    .iter_mut()
+                    .for_each(|u| *u = u.clamp(0.0, MAX_LOG_GAIN));
+            }
+            adam.step_with(options.optimiser, &mut p, &grad, lr);
+            param.after_step(&mut p);
+            on_iteration(&entry);
+            last_loss = entry.loss;
+            iterations = it + 1;
+            if entry.loss < best * (1.0 - sched.min_improvement) {
+                best = entry.loss;
+                best_at = it;
+            }
+            entries.push(entry);
+            if sched.patience > 0 && it >= best_at + sched.patience {
+                plateau = it + 1 < max_iters;
+                break;
+            }
+        }
+        let disp: Vec<f64> = p.iter().map(|&v| param.to_disparity(v)).collect();
+        let seconds = t_scale.elapsed().as_secs_f64();
+        scale_logs.push(ScaleLog {
+            scale,
+            width: lw,
+            height: lh,
+            blur: settings.camera.blur_k,
+            iterations,
+            stopped_on_plateau: plateau,
+            seconds,
+            seconds_per_iteration: seconds / iterations.max(1) as f64,
+            final_loss: last_loss,
+        });
+        current = Some((disp, lw, lh));
+    }
+    let (disp, sw, sh) = current.expect("at least one scale");
+    let disp = if (sw, sh) == (w, h) {
+        disp
+    } else {
+        upsample(&disp, sw, sh, w, h)
+    };
+    let disparity: Image<T> = to_image(&disp, w, h, 1);
+
+    // Confidence: the render's sensitivity to disparity.
+    let aif_full: Image<T> = encode_image(&aif_at(0, &log_gain), w, h, &tone);
+    let mut settings = options.settings.clone();
+    settings.camera.window = Window::auto_unclipped(k_full * max_rel + 1.0);
+    let shifted = |delta: f64| -> Result<Image<T>> {
+        let d: Vec<f64> = disp.iter().map(|&v| (v + delta).clamp(0.0, 1.0)).collect();
+        render_layer_on(
+            options.layer,
+            options.engine,
+            &aif_full,
+            &to_image(&d, w, h, 1),
+            &settings,
+        )
+    };
+    let (up, down) = (shifted(CONFIDENCE_STEP)?, shifted(-CONFIDENCE_STEP)?);
+    let sens: Vec<f64> = (0..w * h)
+        .map(|i| {
+            let span = ((disp[i] + CONFIDENCE_STEP).min(1.0) - (disp[i] - CONFIDENCE_STEP).max(0.0))
+                .max(1e-6);
+            (0..3)
+                .map(|c| (up.data[3 * i + c].f64() - down.data[3 * i + c].f64()).abs())
+                .sum::<f64>()
+                / (3.0 * span)
+        })
+        .collect();
+    let sens = box_mean(&sens, w, h, CONFIDENCE_RADIUS);
+    let conf: Vec<f64> = sens
+        .iter()
+        .map(|&s| s / (s + CONFIDENCE_HALF_SENSITIVITY))
+        .collect();
+
+    let log = DfdLog {
+        schema_version: DFD_LOG_SCHEMA_VERSION,
+        drbokeh_version: env!("CARGO_PKG_VERSION").to_string(),
+        width: w,
+        height: h,
+        focus,
+        blur: k_full,
+        options: RunOptions::of(options),
+        clipped_aif_pixels: clipped_idx.len(),
+        clipped_target_pixels: target_clipped.iter().filter(|&&c| c).count(),
+        masked_fraction,
+        scales: scale_logs,
+        entries,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    Ok(DfdResult {
+        disparity,
+        confidence: to_image(&conf, w, h, 1),
+        log,
+    })
+}
+
+/// Plane sweep at one scale: for each of `n` constant disparities, the mean absolute
+/// difference between its render and the target over a 5x5 box (left-out pixels count
+/// zero); each pixel takes the disparity with the smallest difference.
+fn sweep<T: Real>(
+    options: &DfdOptions,
+    settings: &crate::RenderSettings,
+    aif: &Image<T>,
+    target: &Image<T>,
+    excluded: &[bool],
+    n: usize,
+) -> Result<Vec<f64>> {
+    let (w, h) = (aif.width, aif.height);
+    let mut best = vec![(f64::INFINITY, 0.5f64); w * h];
+    for k in 0..n {
+        let d = k as f64 / (n - 1) as f64;
+        let disp: Image<T> = to_image(&vec![d; w * h], w, h, 1);
+        let render = render_layer_on(options.layer, options.engine, aif, &disp, settings)?;
+        let err: Vec<f64> = (0..w * h)
+            .map(|i| {
+                if excluded[i] {
+                    return 0.0;
+                }
+                (0..3)
+                    .map(|c| {
+                        (render.data[3 * i + c].f64().clamp(0.0, 1.0)
+                            - target.data[3 * i + c].f64())
+                        .abs()
+                    })
+                    .sum::<f64>()
+            })
+            .collect();
+        let err = box_mean(&err, w, h, SWEEP_RADIUS);
+        for (b, &e) in best.iter_mut().zip(&err) {
+            if e < b.0 {
+                *b = (e, d);
+            }
+        }
+    }
+    Ok(best.into_iter().map(|b| b.1).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pool_adjoint_is_the_transpose_of_pool() {
+        let (w, h, ch) = (7, 6, 2);
+        let x: Vec<f64> = (0..w * h * ch).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let g: Vec<f64> = (0..(w / 2) * (h / 2) * ch)
+            .map(|i| ((i * 13) % 7) as f64 - 3.0)
+            .collect();
+        let lhs: f64 = pool(&x, w, h, ch).iter().zip(&g).map(|(a, b)| a * b).sum();
+        let rhs: f64 = x
+            .iter()
+            .zip(&pool_adjoint(&g, w, h, ch))
+            .map(|(a, b)| a * b)
+            .sum();
+        assert!((lhs - rhs).abs() < 1e-9);
+    }
+
+    #[test]
+    fn upsample_keeps_constants_and_ramps() {
+        let c = upsample(&[0.3; 12], 4, 3, 8, 6);
+        assert!(c.iter().all(|v| (v - 0.3).abs() < 1e-12));
+        // A ramp in x stays monotonic.
+        let ramp: Vec<f64> = (0..12).map(|i| (i % 4) as f64).collect();
+        let up = upsample(&ramp, 4, 3, 8, 6);
+        for row in up.chunks(8) {
+            assert!(row.windows(2).all(|p| p[1] >= p[0]));
+        }
+    }
+
+    #[test]
+    fn parameterisations_round_trip() {
+        for p in [Parameterisation::Clamped, Parameterisation::Sigmoid] {
+            for d in [0.05, 0.3, 0.5, 0.95] {
+                assert!((p.to_disparity(p.from_disparity(d)) - d).abs() < 1e-9);
+            }
+        }
+        // The sigmoid's derivative against a finite difference.
+        let s = Parameterisation::Sigmoid;
+        let u = 0.7;
+        let fd = (s.to_disparity(u + 1e-6) - s.to_disparity(u - 1e-6)) / 2e-6;
+        assert!((fd - s.derivative(u)).abs() < 1e-8);
+    }
+
+    #[test]
+    fn dilate_reaches_the_radius_only() {
+        let (w, h) = (11, 11);
+        let mut seed = vec![false; w * h];
+        seed[5 * w + 5] = true;
+        let d = dilate(&seed, w, h, 3.0);
+        assert!(d[5 * w + 8] && d[8 * w + 5] && !d[5 * w + 9] && !d[8 * w + 8]);
+    }
+}
