@@ -15,23 +15,24 @@ use std::path::{Path, PathBuf};
 /// Optimiser options shared by `dfd` and `dfd-eval`.
 #[derive(Args, Debug, Clone)]
 pub struct OptimiserArgs {
-    /// Coarse-to-fine scales (each halves the pair and K). 0: as many as keep the smaller
-    /// side at least 32 pixels.
-    #[arg(long, default_value_t = 0, value_name = "N")]
-    pub scales: usize,
-    /// Finest scale optimised (0 = full resolution; the result is upsampled from it).
-    /// Default: the finest whose iteration stays under a cost budget (pixels x disc area
-    /// of the largest blur <= 6e7), so large or very blurred pairs stop at a coarser scale.
+    /// Finest scale optimised: scale S is the pair halved S times (pooled in linear light)
+    /// with K halved S times; the result is upsampled to full resolution. Default: the
+    /// finest whose iteration stays under a cost budget (pixels x disc area of the largest
+    /// blur <= 5e6), so strongly blurred or large pairs are optimised at a coarser scale.
     #[arg(long, value_name = "S")]
     pub finest_scale: Option<usize>,
+    /// Coarser scales optimised first, each starting the next (coarse to fine). Default 0:
+    /// on ray-traced pairs the coarse scales led away from the true depth (docs/dfd.md).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub coarse_scales: usize,
     /// Most Adam iterations at each coarse scale.
-    #[arg(long, default_value_t = 150, value_name = "N")]
+    #[arg(long, default_value_t = 100, value_name = "N")]
     pub iterations: usize,
-    /// Most Adam iterations at the finest scale optimised (the expensive one).
-    #[arg(long, default_value_t = 30, value_name = "N")]
+    /// Most Adam iterations at the finest scale optimised.
+    #[arg(long, default_value_t = 40, value_name = "N")]
     pub fine_iterations: usize,
     /// Stop a scale after this many iterations without a 0.1 % lower loss (0: never).
-    #[arg(long, default_value_t = 15, value_name = "N")]
+    #[arg(long, default_value_t = 10, value_name = "N")]
     pub patience: usize,
     /// Learning rate at the coarsest scale (in units of the parameterisation's variable).
     #[arg(long, default_value_t = 0.1)]
@@ -51,9 +52,10 @@ pub struct OptimiserArgs {
     /// loss) or ignore.
     #[arg(long, default_value = "model", value_name = "MODE")]
     pub highlights: String,
-    /// Initial disparity: a number in [0, 1] (everywhere), or sweepN (the best of N
-    /// constant disparities per pixel at the coarsest scale).
-    #[arg(long, default_value = "0.5", value_name = "INIT")]
+    /// Initial disparity: sweepN (default sweep9: render the pair at N constant
+    /// disparities, keep per pixel the one that matches best over an edge-aware window),
+    /// or a number in [0, 1] (everywhere).
+    #[arg(long, default_value = "sweep9", value_name = "INIT")]
     pub init: String,
     /// Gamma of the display encoding.
     #[arg(long, default_value_t = 2.2)]
@@ -68,8 +70,8 @@ pub struct OptimiserArgs {
 impl OptimiserArgs {
     /// Applies these options to `o`.
     fn apply(&self, o: &mut DfdOptions) -> Result<()> {
-        o.schedule.scales = self.scales;
         o.schedule.finest_scale = self.finest_scale;
+        o.schedule.coarse_scales = self.coarse_scales;
         o.schedule.iterations = self.iterations;
         o.schedule.fine_iterations = self.fine_iterations;
         o.schedule.patience = self.patience;
@@ -110,9 +112,10 @@ fn parse_init(s: &str) -> Result<Init> {
 /// focus inside the scene, a pixel as far in front of it as another is behind blurs the
 /// same. Focus on the nearest (focus 1) or the farthest (focus 0) object if you can.
 ///
-/// Loss: 0.5 L1 + 0.5 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
-/// coarse to fine; clipped highlights of the all-in-focus image are modelled; pixels the
-/// defocused image clips are left out. Writes the disparity (near = 1), a confidence map
+/// Loss: 0.5 L1 + 20 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
+/// started from a plane sweep, at the finest scale a cost budget allows; clipped
+/// highlights of the all-in-focus image are modelled (their lost energy is found in the
+/// defocused image); pixels the defocused image clips are left out. Writes the disparity (near = 1), a confidence map
 /// (where the pair carries depth information), a preview and a JSON log of every
 /// iteration and the time per scale.
 ///
@@ -289,8 +292,10 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         o.initial_disparity = Some(d);
     }
     let bar = Bar::new("dfd", a.quiet);
-    let n_scales = o.schedule.scales_for(aif.width, aif.height) as u64;
-    bar.start(o.schedule.iterations as u64 * n_scales.saturating_sub(1) + o.schedule.fine_iterations as u64);
+    bar.start(
+        o.schedule.iterations as u64 * o.schedule.coarse_scales as u64
+            + o.schedule.fine_iterations as u64,
+    );
     let result = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
     bar.finish();
 

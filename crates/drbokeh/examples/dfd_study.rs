@@ -58,13 +58,13 @@ fn main() {
         s.camera.blur_k = scene.blur_k * get("kscale", "1").parse::<f64>().unwrap();
         let layer: RenderLayer = get("layer", "drbokeh").parse().unwrap();
         let mut o = DfdOptions::new(s.clone(), layer);
-        o.schedule.scales = get("scales", "0").parse().unwrap();
+        o.schedule.coarse_scales = get("coarse", "0").parse().unwrap();
         o.schedule.iterations = get("iters", "150").parse().unwrap();
         o.schedule.finest_scale = kv.get("finest").map(|v| v.parse().unwrap());
-        o.schedule.fine_iterations = get("fine", "30").parse().unwrap();
+        o.schedule.fine_iterations = get("fine", "60").parse().unwrap();
         o.schedule.learning_rate = get("lr", "0.1").parse().unwrap();
         o.schedule.learning_rate_decay = get("decay", "0.7").parse().unwrap();
-        o.schedule.patience = get("patience", "15").parse().unwrap();
+        o.schedule.patience = get("patience", "10").parse().unwrap();
         o.schedule.min_improvement = get("minimp", "0.001").parse().unwrap();
         o.parameterisation = get("param", "sigmoid").parse::<Parameterisation>().unwrap();
         o.highlights = get("hl", "model").parse::<Highlights>().unwrap();
@@ -73,7 +73,7 @@ fn main() {
             o.initial_disparity = Some(scene.disparity.clone());
         }
         o.engine = get("engine", "fast").parse().unwrap();
-        let init = get("init", "0.5");
+        let init = get("init", "sweep9");
         o.init = if let Some(n) = init.strip_prefix("sweep") {
             Init::Sweep(n.parse().unwrap())
         } else {
@@ -137,6 +137,9 @@ fn main() {
             r.log.masked_fraction,
             r.log.scales.last().unwrap().final_loss
         );
+        let le = r.log.entries.last().unwrap();
+        println!("   terms: l1 {:?} smooth {:?} structure {:?}; first entry of last scale: {:?}", le.l1, le.smoothness, le.structure,
+            r.log.entries.iter().find(|x| x.scale == le.scale).map(|x| (x.loss, x.l1, x.smoothness, x.structure)));
         maes.push((e.mae, c.mae));
         if get("save", "1") == "1" {
             let out = format!(

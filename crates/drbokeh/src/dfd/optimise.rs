@@ -6,10 +6,11 @@ use super::{
     render_layer_on, render_layer_vjp_on, DfdOptions, DfdResult, Highlights, Init, Optimiser,
     Parameterisation, CONFIDENCE_HALF_SENSITIVITY,
 };
+use super::maps::{box_mean, dilate, encode_image, pool, pool_adjoint, to_image, upsample};
+use super::sweep::sweep;
 use crate::camera::Window;
 use crate::image::Image;
 use crate::loss;
-use crate::model::Tone;
 use crate::{Error, Real, Result};
 use std::time::Instant;
 
@@ -25,7 +26,7 @@ const GAIN_LEARNING_RATE: f64 = 0.1;
 const CONFIDENCE_STEP: f64 = 0.02;
 /// Half-size of the confidence map's box (5x5).
 const CONFIDENCE_RADIUS: usize = 2;
-/// Half-size of the plane sweep's comparison box (5x5).
+/// Smallest half-size of the plane sweep's comparison box (5x5); it grows with the blur.
 const SWEEP_RADIUS: usize = 2;
 
 /// Adam state for a vector of parameters.
@@ -121,106 +122,6 @@ impl Parameterisation {
     }
 }
 
-/// 2x2 average pooling of a per-pixel vector (`ch` values per pixel), dropping an odd last
-/// row or column (as [`loss::pyramid::avg_pool2`]).
-fn pool(data: &[f64], w: usize, h: usize, ch: usize) -> Vec<f64> {
-    let (pw, ph) = (w / 2, h / 2);
-    let mut out = vec![0.0; pw * ph * ch];
-    for y in 0..ph {
-        for x in 0..pw {
-            for c in 0..ch {
-                let at = |xx: usize, yy: usize| data[(yy * w + xx) * ch + c];
-                out[(y * pw + x) * ch + c] = 0.25
-                    * (at(2 * x, 2 * y)
-                        + at(2 * x + 1, 2 * y)
-                        + at(2 * x, 2 * y + 1)
-                        + at(2 * x + 1, 2 * y + 1));
-            }
-        }
-    }
-    out
-}
-
-/// The adjoint of [`pool`]: spreads a pooled gradient back onto `w x h`.
-fn pool_adjoint(grad: &[f64], w: usize, h: usize, ch: usize) -> Vec<f64> {
-    let (pw, ph) = (w / 2, h / 2);
-    let mut out = vec![0.0; w * h * ch];
-    for y in 0..ph {
-        for x in 0..pw {
-            for c in 0..ch {
-                let g = 0.25 * grad[(y * pw + x) * ch + c];
-                for (xx, yy) in [
-                    (2 * x, 2 * y),
-                    (2 * x + 1, 2 * y),
-                    (2 * x, 2 * y + 1),
-                    (2 * x + 1, 2 * y + 1),
-                ] {
-                    out[(yy * w + xx) * ch + c] += g;
-                }
-            }
-        }
-    }
-    out
-}
-
-/// Bilinear upsampling of a one-channel map from `sw x sh` to `w x h` (pixel centres
-/// aligned as for 2x pooling: fine pixel `x` sits at coarse `(x + 0.5) / 2 - 0.5`).
-fn upsample(data: &[f64], sw: usize, sh: usize, w: usize, h: usize) -> Vec<f64> {
-    let mut out = vec![0.0; w * h];
-    let (fx_scale, fy_scale) = (sw as f64 / w as f64, sh as f64 / h as f64);
-    for y in 0..h {
-        let fy = ((y as f64 + 0.5) * fy_scale - 0.5).clamp(0.0, (sh - 1) as f64);
-        let (y0, ty) = (fy.floor() as usize, fy - fy.floor());
-        let y1 = (y0 + 1).min(sh - 1);
-        for x in 0..w {
-            let fx = ((x as f64 + 0.5) * fx_scale - 0.5).clamp(0.0, (sw - 1) as f64);
-            let (x0, tx) = (fx.floor() as usize, fx - fx.floor());
-            let x1 = (x0 + 1).min(sw - 1);
-            out[y * w + x] = (1.0 - ty)
-                * ((1.0 - tx) * data[y0 * sw + x0] + tx * data[y0 * sw + x1])
-                + ty * ((1.0 - tx) * data[y1 * sw + x0] + tx * data[y1 * sw + x1]);
-        }
-    }
-    out
-}
-
-/// Mean over a `(2r+1)^2` box (clamped to the image) of a one-channel map.
-fn box_mean(data: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
-    let mut out = vec![0.0; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let (mut s, mut n) = (0.0, 0.0);
-            for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
-                    s += data[yy * w + xx];
-                    n += 1.0;
-                }
-            }
-            out[y * w + x] = s / n;
-        }
-    }
-    out
-}
-
-fn to_image<T: Real>(data: &[f64], w: usize, h: usize, ch: usize) -> Image<T> {
-    Image {
-        width: w,
-        height: h,
-        channels: ch,
-        data: data.iter().map(|&v| T::c(v)).collect(),
-    }
-}
-
-/// Linear values to an encoded image.
-fn encode_image<T: Real>(lin: &[f64], w: usize, h: usize, tone: &Tone) -> Image<T> {
-    Image {
-        width: w,
-        height: h,
-        channels: 3,
-        data: lin.iter().map(|&v| T::c(tone.encode(v.max(0.0)))).collect(),
-    }
-}
-
 /// One scale of the pyramid.
 struct Level {
     width: usize,
@@ -229,30 +130,6 @@ struct Level {
     target: Vec<f64>,
     /// Pixels left out of the loss.
     excluded: Vec<bool>,
-}
-
-/// Marks every pixel within `radius` of a pixel where `seed` holds.
-fn dilate(seed: &[bool], w: usize, h: usize, radius: f64) -> Vec<bool> {
-    let r = radius.ceil() as isize;
-    let mut out = vec![false; w * h];
-    let offsets: Vec<(isize, isize)> = (-r..=r)
-        .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
-        .filter(|&(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius * radius)
-        .collect();
-    for y in 0..h as isize {
-        for x in 0..w as isize {
-            if !seed[y as usize * w + x as usize] {
-                continue;
-            }
-            for &(dx, dy) in &offsets {
-                let (xx, yy) = (x + dx, y + dy);
-                if xx >= 0 && yy >= 0 && xx < w as isize && yy < h as isize {
-                    out[yy as usize * w + xx as usize] = true;
-                }
-            }
-        }
-    }
-    out
 }
 
 fn check_inputs<T: Real>(all_in_focus: &Image<T>, defocused: &Image<T>) -> Result<()> {
@@ -342,7 +219,8 @@ pub fn estimate_disparity<T: Real>(
     let param = options.parameterisation;
     let sched = options.schedule;
     // Pyramid, pooled in linear light.
-    let n_scales = options.schedule.scales_for(w, h);
+    let finest = sched.finest_for(w, h, k_full * max_rel);
+    let n_scales = sched.levels_for(w, h, finest);
     let aif_lin: Vec<f64> = all_in_focus
         .data
         .iter()
@@ -359,7 +237,7 @@ pub fn estimate_disparity<T: Real>(
         target: defocused.data.iter().map(|v| v.f64()).collect(),
         excluded: excluded.clone(),
     }];
-    let (mut lin_t, mut excl) = (target_lin, excluded);
+    let (mut lin_t, mut excl) = (target_lin.clone(), excluded);
     while levels.len() < n_scales {
         let last = levels.last().expect("one level");
         let (lw, lh) = (last.width, last.height);
@@ -387,12 +265,23 @@ pub fn estimate_disparity<T: Real>(
         excl = next_e;
     }
     let n_scales = levels.len();
-    let finest = sched.finest_for(w, h, k_full * max_rel, n_scales);
 
     // Highlight gains (log, >= 0) on the clipped aif channels.
     let model_highlights = options.highlights == Highlights::Model;
     let clipped_idx: Vec<usize> = (0..aif_clipped.len()).filter(|&i| aif_clipped[i]).collect();
-    let mut log_gain = vec![0.0f64; clipped_idx.len()];
+    let mut log_gain = if model_highlights {
+        super::highlights::energy_log_gains(
+            &aif_lin,
+            &target_lin,
+            &clipped_idx,
+            w,
+            h,
+            k_full * max_rel + 2.0,
+            MAX_LOG_GAIN,
+        )
+    } else {
+        vec![0.0f64; clipped_idx.len()]
+    };
     let mut gain_adam = Adam::new(clipped_idx.len());
     // The aif at scale `s` (linear), with the current gains.
     let aif_at = |s: usize, log_gain: &[f64]| -> Vec<f64> {
@@ -446,8 +335,24 @@ pub fn estimate_disparity<T: Real>(
             (None, None) => match options.init {
                 Init::Constant(v) => vec![v; lw * lh],
                 Init::Sweep(n) => {
-                    let aif: Image<T> = encode_image(&aif_at(scale, &log_gain), lw, lh, &tone);
-                    sweep(options, &settings, &aif, &target, &level.excluded, n)?
+                    // The sweep runs at the finest scale optimised (where blur sizes are
+                    // resolved) and is pooled down to this one.
+                    let fl = &levels[finest];
+                    let (fw, fh) = (fl.width, fl.height);
+                    let mut fs = options.settings.clone();
+                    fs.camera.blur_k = k_full / (1u64 << finest) as f64;
+                    fs.camera.window = Window::auto_unclipped(fs.camera.blur_k * max_rel + 1.0);
+                    let aif: Image<T> = encode_image(&aif_at(finest, &log_gain), fw, fh, &tone);
+                    let ft: Image<T> = to_image(&fl.target, fw, fh, 3);
+                    let radius = ((fs.camera.blur_k * max_rel / 2.0).round() as usize).max(SWEEP_RADIUS);
+                    let mut d = sweep(options, &fs, &aif, &ft, &fl.excluded, n, radius)?;
+                    let (mut mw, mut mh) = (fw, fh);
+                    for _ in finest..scale {
+                        d = pool(&d, mw, mh, 1);
+                        mw /= 2;
+                        mh /= 2;
+                    }
+                    d
                 }
             },
         };
@@ -619,78 +524,10 @@ pub fn estimate_disparity<T: Real>(
     })
 }
 
-/// Plane sweep at one scale: for each of `n` constant disparities, the mean absolute
-/// difference between its render and the target over a 5x5 box (left-out pixels count
-/// zero); each pixel takes the disparity with the smallest difference.
-fn sweep<T: Real>(
-    options: &DfdOptions,
-    settings: &crate::RenderSettings,
-    aif: &Image<T>,
-    target: &Image<T>,
-    excluded: &[bool],
-    n: usize,
-) -> Result<Vec<f64>> {
-    let (w, h) = (aif.width, aif.height);
-    let mut best = vec![(f64::INFINITY, 0.5f64); w * h];
-    for k in 0..n {
-        let d = k as f64 / (n - 1) as f64;
-        let disp: Image<T> = to_image(&vec![d; w * h], w, h, 1);
-        let render = render_layer_on(options.layer, options.engine, aif, &disp, settings)?;
-        let err: Vec<f64> = (0..w * h)
-            .map(|i| {
-                if excluded[i] {
-                    return 0.0;
-                }
-                (0..3)
-                    .map(|c| {
-                        (render.data[3 * i + c].f64().clamp(0.0, 1.0)
-                            - target.data[3 * i + c].f64())
-                        .abs()
-                    })
-                    .sum::<f64>()
-            })
-            .collect();
-        let err = box_mean(&err, w, h, SWEEP_RADIUS);
-        for (b, &e) in best.iter_mut().zip(&err) {
-            if e < b.0 {
-                *b = (e, d);
-            }
-        }
-    }
-    Ok(best.into_iter().map(|b| b.1).collect())
-}
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn pool_adjoint_is_the_transpose_of_pool() {
-        let (w, h, ch) = (7, 6, 2);
-        let x: Vec<f64> = (0..w * h * ch).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
-        let g: Vec<f64> = (0..(w / 2) * (h / 2) * ch)
-            .map(|i| ((i * 13) % 7) as f64 - 3.0)
-            .collect();
-        let lhs: f64 = pool(&x, w, h, ch).iter().zip(&g).map(|(a, b)| a * b).sum();
-        let rhs: f64 = x
-            .iter()
-            .zip(&pool_adjoint(&g, w, h, ch))
-            .map(|(a, b)| a * b)
-            .sum();
-        assert!((lhs - rhs).abs() < 1e-9);
-    }
-
-    #[test]
-    fn upsample_keeps_constants_and_ramps() {
-        let c = upsample(&[0.3; 12], 4, 3, 8, 6);
-        assert!(c.iter().all(|v| (v - 0.3).abs() < 1e-12));
-        // A ramp in x stays monotonic.
-        let ramp: Vec<f64> = (0..12).map(|i| (i % 4) as f64).collect();
-        let up = upsample(&ramp, 4, 3, 8, 6);
-        for row in up.chunks(8) {
-            assert!(row.windows(2).all(|p| p[1] >= p[0]));
-        }
-    }
 
     #[test]
     fn parameterisations_round_trip() {
@@ -704,14 +541,5 @@ mod tests {
         let u = 0.7;
         let fd = (s.to_disparity(u + 1e-6) - s.to_disparity(u - 1e-6)) / 2e-6;
         assert!((fd - s.derivative(u)).abs() < 1e-8);
-    }
-
-    #[test]
-    fn dilate_reaches_the_radius_only() {
-        let (w, h) = (11, 11);
-        let mut seed = vec![false; w * h];
-        seed[5 * w + 5] = true;
-        let d = dilate(&seed, w, h, 3.0);
-        assert!(d[5 * w + 8] && d[8 * w + 5] && !d[5 * w + 9] && !d[8 * w + 8]);
     }
 }
