@@ -57,6 +57,10 @@ pub struct OptimiserArgs {
     /// or a number in [0, 1] (everywhere).
     #[arg(long, default_value = "sweep9", value_name = "INIT")]
     pub init: String,
+    /// Edge sensitivity s of the smoothness term, whose weight across a colour step dI is
+    /// exp(-s |dI|): larger lets disparity edges form at colour edges (the paper: 1).
+    #[arg(long, value_name = "S")]
+    pub edge_sensitivity: Option<f64>,
     /// Gamma of the display encoding.
     #[arg(long, default_value_t = 2.2)]
     pub gamma: f64,
@@ -81,6 +85,9 @@ impl OptimiserArgs {
         o.optimiser = self.optimiser.parse::<Optimiser>()?;
         o.highlights = self.highlights.parse::<Highlights>()?;
         o.init = parse_init(&self.init)?;
+        if let Some(e) = self.edge_sensitivity {
+            o.edge_sensitivity = e;
+        }
         o.settings.camera.gamma = self.gamma;
         o.engine = self.engine.parse()?;
         o.validate()?;
@@ -90,9 +97,9 @@ impl OptimiserArgs {
 
 fn parse_init(s: &str) -> Result<Init> {
     if let Some(n) = s.strip_prefix("sweep") {
-        let n: usize = n
-            .parse()
-            .with_context(|| format!("invalid parameter --init: '{s}' (use sweepN, e.g. sweep9)"))?;
+        let n: usize = n.parse().with_context(|| {
+            format!("invalid parameter --init: '{s}' (use sweepN, e.g. sweep9)")
+        })?;
         return Ok(Init::Sweep(n));
     }
     let v: f64 = s.parse().with_context(|| {
@@ -286,8 +293,14 @@ pub fn run(a: &DfdArgs) -> Result<()> {
                 aif.height
             );
         }
-        if d.data.iter().any(|v| !v.is_finite() || *v < 0.0 || *v > 1.0) {
-            bail!("{}: disparity values must be finite and in [0, 1]", path.display());
+        if d.data
+            .iter()
+            .any(|v| !v.is_finite() || *v < 0.0 || *v > 1.0)
+        {
+            bail!(
+                "{}: disparity values must be finite and in [0, 1]",
+                path.display()
+            );
         }
         o.initial_disparity = Some(d);
     }
@@ -315,7 +328,12 @@ pub fn run(a: &DfdArgs) -> Result<()> {
             .map_err(|e| drbokeh::Error::file(&log_path, e.to_string()))
     })?;
     if !a.quiet {
-        let last = result.log.entries.last().map(|e| e.loss).unwrap_or(f64::NAN);
+        let last = result
+            .log
+            .entries
+            .last()
+            .map(|e| e.loss)
+            .unwrap_or(f64::NAN);
         let scales: Vec<String> = result
             .log
             .scales
@@ -363,7 +381,12 @@ pub fn run(a: &DfdArgs) -> Result<()> {
 #[command(verbatim_doc_comment)]
 pub struct DfdEvalArgs {
     /// Ray-traced benchmark directory.
-    #[arg(long, value_name = "DIR", conflicts_with = "synthetic", required_unless_present = "synthetic")]
+    #[arg(
+        long,
+        value_name = "DIR",
+        conflicts_with = "synthetic",
+        required_unless_present = "synthetic"
+    )]
     pub benchmark: Option<PathBuf>,
     /// Synthetic pairs rendered by our renderer instead.
     #[arg(long)]

@@ -27,13 +27,21 @@ fn main() {
         let mut s = RenderSettings::physical(scene.focus);
         s.camera.blur_k = scene.blur_k;
         s.camera.window = drbokeh::Window::auto_unclipped(scene.blur_k + 1.0);
-        let stack = drbokeh::LayerStack::single(scene.aif.clone(), scene.disparity.clone()).unwrap();
+        let stack =
+            drbokeh::LayerStack::single(scene.aif.clone(), scene.disparity.clone()).unwrap();
         for _ in 0..2 {
             let t = std::time::Instant::now();
-            let out = drbokeh::render(&stack, &s, drbokeh::Engine::Fast, &drbokeh::NoProgress).unwrap();
+            let out =
+                drbokeh::render(&stack, &s, drbokeh::Engine::Fast, &drbokeh::NoProgress).unwrap();
             let t1 = t.elapsed().as_secs_f64();
             let t = std::time::Instant::now();
-            let (_o, tape) = drbokeh::render_with_tape_on(&stack, &s, drbokeh::Engine::Fast, &drbokeh::NoProgress).unwrap();
+            let (_o, tape) = drbokeh::render_with_tape_on(
+                &stack,
+                &s,
+                drbokeh::Engine::Fast,
+                &drbokeh::NoProgress,
+            )
+            .unwrap();
             let t2 = t.elapsed().as_secs_f64();
             let t = std::time::Instant::now();
             let (_, g) = drbokeh::loss::hssim_grad(&out, &scene.ground_truth).unwrap();
@@ -41,7 +49,9 @@ fn main() {
             let t = std::time::Instant::now();
             let _ = tape.backward(&g, &drbokeh::NoProgress).unwrap();
             let t4 = t.elapsed().as_secs_f64();
-            println!("fast fwd {t1:.3}s, fwd+tape {t2:.3}s, hssim_grad {t3:.3}s, backward {t4:.3}s");
+            println!(
+                "fast fwd {t1:.3}s, fwd+tape {t2:.3}s, hssim_grad {t3:.3}s, backward {t4:.3}s"
+            );
         }
         return;
     }
@@ -61,7 +71,7 @@ fn main() {
         o.schedule.coarse_scales = get("coarse", "0").parse().unwrap();
         o.schedule.iterations = get("iters", "150").parse().unwrap();
         o.schedule.finest_scale = kv.get("finest").map(|v| v.parse().unwrap());
-        o.schedule.fine_iterations = get("fine", "60").parse().unwrap();
+        o.schedule.fine_iterations = get("fine", "40").parse().unwrap();
         o.schedule.learning_rate = get("lr", "0.1").parse().unwrap();
         o.schedule.learning_rate_decay = get("decay", "0.7").parse().unwrap();
         o.schedule.patience = get("patience", "10").parse().unwrap();
@@ -69,6 +79,16 @@ fn main() {
         o.parameterisation = get("param", "sigmoid").parse::<Parameterisation>().unwrap();
         o.highlights = get("hl", "model").parse::<Highlights>().unwrap();
         o.optimiser = get("opt", "adam").parse().unwrap();
+        o.edge_sensitivity = get("edge", "10").parse().unwrap();
+        let mr: f64 = get("mrad", "1.5").parse().unwrap();
+        o.median = if mr > 0.0 {
+            Some(drbokeh::dfd::MedianRefine {
+                radius_blur_fraction: mr,
+                sigma: get("msig", "0.05").parse().unwrap(),
+            })
+        } else {
+            None
+        };
         if get("from_truth", "0") == "1" {
             o.initial_disparity = Some(scene.disparity.clone());
         }
@@ -105,7 +125,48 @@ fn main() {
         let mut v: Vec<f32> = scene.disparity.data.clone();
         v.sort_by(f32::total_cmp);
         let med = v[v.len() / 2];
-        let est = &r.disparity;
+        let wm_r: usize = get("wmed", "0").parse().unwrap();
+        let wm_sigma: f64 = get("wsig", "0.1").parse().unwrap();
+        let wm_conf = get("wconf", "0") == "1";
+        let est_owned = if wm_r > 0 {
+            let (w, h) = (r.disparity.width, r.disparity.height);
+            let a = &aif;
+            let mut out = r.disparity.clone();
+            for y in 0..h {
+                for x in 0..w {
+                    let i = y * w + x;
+                    let mut v: Vec<(f32, f64)> = Vec::new();
+                    for yy in y.saturating_sub(wm_r)..(y + wm_r + 1).min(h) {
+                        for xx in x.saturating_sub(wm_r)..(x + wm_r + 1).min(w) {
+                            let j = yy * w + xx;
+                            let d2: f64 = (0..3)
+                                .map(|c| ((a.data[3 * i + c] - a.data[3 * j + c]) as f64).powi(2))
+                                .sum::<f64>()
+                                / 3.0;
+                            let mut wt = (-d2 / (2.0 * wm_sigma * wm_sigma)).exp();
+                            if wm_conf {
+                                wt *= r.confidence.data[j] as f64 + 0.05;
+                            }
+                            v.push((r.disparity.data[j], wt));
+                        }
+                    }
+                    v.sort_by(|p, q| p.0.total_cmp(&q.0));
+                    let total: f64 = v.iter().map(|p| p.1).sum();
+                    let mut acc = 0.0;
+                    for p in &v {
+                        acc += p.1;
+                        if acc >= total / 2.0 {
+                            out.data[i] = p.0;
+                            break;
+                        }
+                    }
+                }
+            }
+            out
+        } else {
+            r.disparity.clone()
+        };
+        let est = &est_owned;
         let cst = Image::from_vec(est.width, est.height, 1, vec![med; est.data.len()]).unwrap();
         let e = disparity_errors(est, &scene.disparity);
         let c = disparity_errors(&cst, &scene.disparity);
@@ -114,12 +175,18 @@ fn main() {
         let fg = |i: usize| (scene.disparity.data[i] - bg).abs() > 1e-4;
         let efg = drbokeh::dfd::masked_disparity_errors(est, &scene.disparity, None, fg);
         let ebg = drbokeh::dfd::masked_disparity_errors(est, &scene.disparity, None, |i| !fg(i));
-        let conf_mean = r.confidence.data.iter().map(|&v| v as f64).sum::<f64>() / r.confidence.data.len() as f64;
+        let conf_mean = r.confidence.data.iter().map(|&v| v as f64).sum::<f64>()
+            / r.confidence.data.len() as f64;
         let scales: Vec<String> = r
             .log
             .scales
             .iter()
-            .map(|s| format!("{}:{}it/{:.3}s", s.width, s.iterations, s.seconds_per_iteration))
+            .map(|s| {
+                format!(
+                    "{}:{}it/{:.3}s",
+                    s.width, s.iterations, s.seconds_per_iteration
+                )
+            })
             .collect();
         println!(
             "{tag} {} K {:.1} f {:.2} | MAE {:.3} (fg {:.3} bg {:.3}) const {:.3} | {:.1}s [{}] conf {:.2} clipped {} masked {:.2} loss {:.4}",
@@ -138,13 +205,27 @@ fn main() {
             r.log.scales.last().unwrap().final_loss
         );
         let le = r.log.entries.last().unwrap();
-        println!("   terms: l1 {:?} smooth {:?} structure {:?}; first entry of last scale: {:?}", le.l1, le.smoothness, le.structure,
-            r.log.entries.iter().find(|x| x.scale == le.scale).map(|x| (x.loss, x.l1, x.smoothness, x.structure)));
+        println!(
+            "   terms: l1 {:?} smooth {:?} structure {:?}; first entry of last scale: {:?}",
+            le.l1,
+            le.smoothness,
+            le.structure,
+            r.log.entries.iter().find(|x| x.scale == le.scale).map(|x| (
+                x.loss,
+                x.l1,
+                x.smoothness,
+                x.structure
+            ))
+        );
         maes.push((e.mae, c.mae));
         if get("save", "1") == "1" {
             let out = format!(
                 "/work/data/dfd/study/{}_{}_{}.png",
-                path.parent().unwrap().file_name().unwrap().to_string_lossy(),
+                path.parent()
+                    .unwrap()
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy(),
                 scene.name,
                 tag
             );
@@ -156,8 +237,13 @@ fn main() {
                 est.data.iter().flat_map(|&v| [v; 3]).collect(),
             )
             .unwrap();
-            drbokeh::io::write_output(std::path::Path::new(&out), &rgb, drbokeh::io::BitDepth::Eight, |v| v)
-                .unwrap();
+            drbokeh::io::write_output(
+                std::path::Path::new(&out),
+                &rgb,
+                drbokeh::io::BitDepth::Eight,
+                |v| v,
+            )
+            .unwrap();
         }
         if let Some(p) = kv.get("curve") {
             let f = format!("{p}_{}.json", scene.name);

@@ -51,7 +51,13 @@ fn corners(w: usize, h: usize, fx: f64, fy: f64) -> ([usize; 4], [f64; 4], f64, 
 
 /// Bilinear sample of a linear image with clamped borders, and its spatial gradient.
 #[inline]
-fn bilinear<T: Real>(lin: &[[T; 3]], w: usize, h: usize, fx: f64, fy: f64) -> ([T; 3], [T; 3], [T; 3]) {
+fn bilinear<T: Real>(
+    lin: &[[T; 3]],
+    w: usize,
+    h: usize,
+    fx: f64,
+    fy: f64,
+) -> ([T; 3], [T; 3], [T; 3]) {
     let (idx, _, tx, ty) = corners(w, h, fx, fy);
     let (tx, ty) = (T::c(tx), T::c(ty));
     let (a, b, c, d) = (lin[idx[0]], lin[idx[1]], lin[idx[2]], lin[idx[3]]);
@@ -150,7 +156,8 @@ pub fn render_vjp<T: Real>(
                     dacc[c] = dacc[c] + (gx[c] * T::c(ux) + gy[c] * T::c(vy)) * T::c(k);
                 }
             }
-            let g_lin = [0, 1, 2].map(|c| g.data[3 * i + c] * tone.encode_derivative(acc[c] / T::c(n)));
+            let g_lin =
+                [0, 1, 2].map(|c| g.data[3 * i + c] * tone.encode_derivative(acc[c] / T::c(n)));
             let mut total = T::zero();
             for c in 0..3 {
                 total = total + g_lin[c] * dacc[c] / T::c(n);

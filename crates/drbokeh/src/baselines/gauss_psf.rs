@@ -155,8 +155,7 @@ pub fn render_vjp<T: Real>(
     let g_rel: Vec<[T; 3]> = (0..w * h)
         .map(|i| {
             [0, 1, 2].map(|c| {
-                g.data[3 * i + c] * tone.encode_derivative(saved.out_linear[i][c])
-                    / saved.weight[i]
+                g.data[3 * i + c] * tone.encode_derivative(saved.out_linear[i][c]) / saved.weight[i]
             })
         })
         .collect();

@@ -161,7 +161,6 @@ pub fn flatten<T: Real>(stack: &LayerStack<T>, camera: &Camera) -> Result<(Image
     Ok((rgb, disp))
 }
 
-
 /// The GaussPSF baseline of `drbokeh eval` ([`gauss_psf::render_with_camera`]): the camera's
 /// `K`, focus, gamma and offset, and a window wide enough for three standard deviations of
 /// the largest Gaussian, so no blur is clipped.

@@ -604,9 +604,7 @@ pub fn summarise(methods: &[DfdMethod], scenes: &[SceneReport]) -> Vec<GroupSumm
                         mae_foreground: mean(runs.iter().filter_map(|r| r.mae_foreground)),
                         mae_background: mean(runs.iter().filter_map(|r| r.mae_background)),
                         mae_confident: mean(runs.iter().filter_map(|r| r.mae_confident)),
-                        confident_fraction: mean(
-                            runs.iter().filter_map(|r| r.confident_fraction),
-                        ),
+                        confident_fraction: mean(runs.iter().filter_map(|r| r.confident_fraction)),
                         seconds: mean(runs.iter().map(|r| r.seconds)).unwrap_or(0.0),
                     }
                 })

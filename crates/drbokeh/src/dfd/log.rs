@@ -8,10 +8,13 @@
 //!   "layer": "drbokeh" | "gausspsf" | "aperture", "preset": "physical" | "paper" | "custom",
 //!   "gamma",
 //!   "weights": { "l1", "smoothness", "hssim" }, "terms": "hssim" | "single_ssim",
+//!   "edge_sensitivity",
 //!   "schedule": { "scales", "finest_scale", "iterations", "fine_iterations", "learning_rate",
 //!                 "learning_rate_decay", "patience", "min_improvement" },
 //!   "parameterisation": "sigmoid" | "clamped", "optimiser": "shared_adam" | "adam",
-//!   "highlights": "model" | "mask" | "ignore", "init": { "constant": v } | { "sweep": n },
+//!   "highlights": "model" | "mask" | "ignore",
+//!   "median": { "radius_blur_fraction", "sigma" } | null,
+//!   "init": { "constant": v } | { "sweep": n },
 //!   "initial_disparity_given": bool, "engine": "fast" | "threaded" | "reference",
 //!   "clipped_aif_pixels", "clipped_target_pixels", "masked_fraction",
 //!   "scales": [ { "scale", "width", "height", "blur", "iterations", "stopped_on_plateau",
@@ -24,8 +27,8 @@
 //! `structure` are unweighted and `null` where the term is off (or the scale too small).
 
 use super::{
-    DfdOptions, Highlights, Init, LossTerms, LossWeights, Optimiser, Parameterisation, RenderLayer,
-    Schedule,
+    DfdOptions, Highlights, Init, LossTerms, LossWeights, MedianRefine, Optimiser,
+    Parameterisation, RenderLayer, Schedule,
 };
 use serde::{Deserialize, Serialize};
 
@@ -85,6 +88,8 @@ pub struct RunOptions {
     pub weights: LossWeights,
     /// Structural term.
     pub terms: LossTerms,
+    /// Edge sensitivity of the smoothness term.
+    pub edge_sensitivity: f64,
     /// Schedule.
     pub schedule: Schedule,
     /// Parameterisation.
@@ -93,6 +98,8 @@ pub struct RunOptions {
     pub optimiser: Optimiser,
     /// Highlight handling.
     pub highlights: Highlights,
+    /// Weighted-median refinement (null: off).
+    pub median: Option<MedianRefine>,
     /// Initialisation.
     pub init: Init,
     /// Whether a starting disparity map was given (it replaces `init`).
@@ -110,10 +117,12 @@ impl RunOptions {
             gamma: options.settings.camera.gamma,
             weights: options.weights,
             terms: options.terms,
+            edge_sensitivity: options.edge_sensitivity,
             schedule: options.schedule,
             parameterisation: options.parameterisation,
             optimiser: options.optimiser,
             highlights: options.highlights,
+            median: options.median,
             init: options.init,
             initial_disparity_given: options.initial_disparity.is_some(),
             engine: format!("{:?}", options.engine).to_lowercase(),

@@ -116,7 +116,6 @@ pub(super) fn dilate(seed: &[bool], w: usize, h: usize, radius: f64) -> Vec<bool
     out
 }
 
-
 /// A per-pixel vector as an image.
 pub(super) fn to_image<T: Real>(data: &[f64], w: usize, h: usize, ch: usize) -> Image<T> {
     Image {
@@ -137,7 +136,6 @@ pub(super) fn encode_image<T: Real>(lin: &[f64], w: usize, h: usize, tone: &Tone
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -145,7 +143,9 @@ mod tests {
     #[test]
     fn pool_adjoint_is_the_transpose_of_pool() {
         let (w, h, ch) = (7, 6, 2);
-        let x: Vec<f64> = (0..w * h * ch).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let x: Vec<f64> = (0..w * h * ch)
+            .map(|i| ((i * 37) % 11) as f64 - 5.0)
+            .collect();
         let g: Vec<f64> = (0..(w / 2) * (h / 2) * ch)
             .map(|i| ((i * 13) % 7) as f64 - 3.0)
             .collect();
@@ -190,6 +190,31 @@ mod tests {
     }
 
     #[test]
+    fn weighted_median_keeps_edges_and_removes_outliers() {
+        // Two flat colour regions (left dark, right bright) with a disparity that is 0.2 on
+        // the left and 0.8 on the right, plus isolated wrong values: the median removes the
+        // outliers and keeps the edge where the colour changes.
+        let (w, h) = (16, 9);
+        let guide: Vec<[f64; 3]> = (0..w * h)
+            .map(|i| if i % w < 8 { [0.1; 3] } else { [0.9; 3] })
+            .collect();
+        let mut d: Vec<f64> = (0..w * h)
+            .map(|i| if i % w < 8 { 0.2 } else { 0.8 })
+            .collect();
+        d[4 * w + 3] = 0.9;
+        d[2 * w + 12] = 0.1;
+        let m = weighted_median(&d, &guide, w, h, 3, 0.05);
+        for i in 0..w * h {
+            let want = if i % w < 8 { 0.2 } else { 0.8 };
+            assert!(
+                (m[i] - want).abs() < 1.0 / MEDIAN_BINS as f64,
+                "{i}: {}",
+                m[i]
+            );
+        }
+    }
+
+    #[test]
     fn dilate_reaches_the_radius_only() {
         let (w, h) = (11, 11);
         let mut seed = vec![false; w * h];
@@ -197,4 +222,60 @@ mod tests {
         let d = dilate(&seed, w, h, 3.0);
         assert!(d[5 * w + 8] && d[8 * w + 5] && !d[5 * w + 9] && !d[8 * w + 8]);
     }
+}
+
+/// Bins of [`weighted_median`]'s histogram over [0, 1].
+const MEDIAN_BINS: usize = 256;
+
+/// Edge-aware weighted median of a one-channel map with values in [0, 1] over a
+/// `(2r+1)^2` window: each neighbour `y` of `x` weighs `exp(-|I(x) - I(y)|^2 / (2
+/// sigma^2))` (`|.|^2` the mean over channels of the guide's squared difference), and `x`
+/// takes the value where the cumulative weight reaches one half. Values are binned into
+/// [`MEDIAN_BINS`] bins, and the result is the centre of the median bin, refined linearly
+/// within it.
+pub(super) fn weighted_median(
+    data: &[f64],
+    guide: &[[f64; 3]],
+    w: usize,
+    h: usize,
+    r: usize,
+    sigma: f64,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    let inv = 1.0 / (2.0 * 3.0 * sigma * sigma);
+    let bin_of = |v: f64| ((v.clamp(0.0, 1.0) * MEDIAN_BINS as f64) as usize).min(MEDIAN_BINS - 1);
+    let bins: Vec<usize> = data.iter().map(|&v| bin_of(v)).collect();
+    (0..w * h)
+        .into_par_iter()
+        .map_init(
+            || vec![0.0f64; MEDIAN_BINS],
+            |hist, i| {
+                hist.iter_mut().for_each(|v| *v = 0.0);
+                let (x, y) = (i % w, i / w);
+                let g = guide[i];
+                let mut total = 0.0;
+                for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                    for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                        let j = yy * w + xx;
+                        let q = guide[j];
+                        let d2 =
+                            (g[0] - q[0]).powi(2) + (g[1] - q[1]).powi(2) + (g[2] - q[2]).powi(2);
+                        let wt = (-d2 * inv).exp();
+                        hist[bins[j]] += wt;
+                        total += wt;
+                    }
+                }
+                let half = 0.5 * total;
+                let mut acc = 0.0;
+                for (b, &v) in hist.iter().enumerate() {
+                    if acc + v >= half && v > 0.0 {
+                        let t = ((half - acc) / v).clamp(0.0, 1.0);
+                        return (b as f64 + t) / MEDIAN_BINS as f64;
+                    }
+                    acc += v;
+                }
+                data[i]
+            },
+        )
+        .collect()
 }

@@ -25,13 +25,13 @@
 
 pub mod benchmark;
 pub mod experiment;
+mod highlights;
 pub mod layers;
 pub mod log;
-pub mod report;
-mod objective;
-mod highlights;
 mod maps;
+mod objective;
 mod optimise;
+pub mod report;
 mod sweep;
 
 pub use layers::{
@@ -178,6 +178,17 @@ impl std::str::FromStr for Optimiser {
     }
 }
 
+/// The edge-aware weighted median that refines the optimised disparity
+/// (`maps::weighted_median`): classical disparity refinement, which moves depth edges onto
+/// colour edges and removes isolated errors.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MedianRefine {
+    /// Window radius as a fraction of the largest blur radius `K max|d|` (at least 1 px).
+    pub radius_blur_fraction: f64,
+    /// Colour distance (encoded, RMS over channels) of weight `exp(-1/2)`.
+    pub sigma: f64,
+}
+
 /// What to do about pixels clipped (at or above white) in the all-in-focus image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -300,6 +311,9 @@ pub struct DfdOptions {
     pub weights: LossWeights,
     /// Structural term.
     pub terms: LossTerms,
+    /// Edge sensitivity `s` of the smoothness term: its edge weight is `exp(-s |dI|)` (the
+    /// paper's G has `s = 1`); larger lets disparity edges form at colour edges.
+    pub edge_sensitivity: f64,
     /// Iterations and steps.
     pub schedule: Schedule,
     /// How the disparity is kept in range.
@@ -308,6 +322,8 @@ pub struct DfdOptions {
     pub optimiser: Optimiser,
     /// Clipped highlights of the all-in-focus image.
     pub highlights: Highlights,
+    /// Weighted-median refinement of the result (`None`: off).
+    pub median: Option<MedianRefine>,
     /// Initial disparity.
     pub init: Init,
     /// A starting disparity map (the pair's size, one channel) instead of [`DfdOptions::init`];
@@ -330,6 +346,7 @@ impl DfdOptions {
             layer,
             weights: LossWeights::DEFAULT,
             terms: LossTerms::Hssim,
+            edge_sensitivity: 10.0,
             schedule: Schedule {
                 finest_scale: None,
                 coarse_scales: 0,
@@ -343,6 +360,10 @@ impl DfdOptions {
             parameterisation: Parameterisation::Sigmoid,
             optimiser: Optimiser::Adam,
             highlights: Highlights::Model,
+            median: Some(MedianRefine {
+                radius_blur_fraction: 1.5,
+                sigma: 0.05,
+            }),
             init: Init::Sweep(9),
             initial_disparity: None,
             engine: Engine::Fast,
@@ -360,10 +381,7 @@ impl DfdOptions {
             return Err(Error::param("--finest-scale", "must be between 0 and 8"));
         }
         if s.iterations == 0 || s.iterations > 100_000 {
-            return Err(Error::param(
-                "--iterations",
-                "must be between 1 and 100000",
-            ));
+            return Err(Error::param("--iterations", "must be between 1 and 100000"));
         }
         if s.fine_iterations == 0 || s.fine_iterations > 100_000 {
             return Err(Error::param(
@@ -379,6 +397,17 @@ impl DfdOptions {
         }
         if !(s.min_improvement >= 0.0 && s.min_improvement < 1.0) {
             return Err(Error::param("--min-improvement", "must be in [0, 1)"));
+        }
+        if !(self.edge_sensitivity >= 0.0 && self.edge_sensitivity <= 1000.0) {
+            return Err(Error::param("--edge-sensitivity", "must be in [0, 1000]"));
+        }
+        if let Some(m) = self.median {
+            if !(m.radius_blur_fraction > 0.0 && m.radius_blur_fraction <= 10.0) {
+                return Err(Error::param("--median-radius", "must be in (0, 10]"));
+            }
+            if !(m.sigma > 0.0 && m.sigma <= 10.0) {
+                return Err(Error::param("--median-sigma", "must be in (0, 10]"));
+            }
         }
         for (name, w) in [
             ("l1", self.weights.l1),

@@ -1,13 +1,15 @@
 //! The coarse-to-fine Adam loop of [`estimate_disparity`].
 
 use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
+use super::maps::{
+    box_mean, dilate, encode_image, pool, pool_adjoint, to_image, upsample, weighted_median,
+};
 use super::objective::{structure_min_side, ImageObjective, SMOOTHNESS_MIN_SIDE};
+use super::sweep::sweep;
 use super::{
     render_layer_on, render_layer_vjp_on, DfdOptions, DfdResult, Highlights, Init, Optimiser,
     Parameterisation, CONFIDENCE_HALF_SENSITIVITY,
 };
-use super::maps::{box_mean, dilate, encode_image, pool, pool_adjoint, to_image, upsample};
-use super::sweep::sweep;
 use crate::camera::Window;
 use crate::image::Image;
 use crate::loss;
@@ -133,7 +135,10 @@ struct Level {
 }
 
 fn check_inputs<T: Real>(all_in_focus: &Image<T>, defocused: &Image<T>) -> Result<()> {
-    for (what, img) in [("all-in-focus image", all_in_focus), ("defocused image", defocused)] {
+    for (what, img) in [
+        ("all-in-focus image", all_in_focus),
+        ("defocused image", defocused),
+    ] {
         if img.channels != 3 || img.data.len() != img.width * img.height * 3 {
             return Err(Error::input(what, "must be an RGB image (3 channels)"));
         }
@@ -208,7 +213,10 @@ pub fn estimate_disparity<T: Real>(
         .collect();
     let mut excluded = target_clipped.clone();
     if options.highlights == Highlights::Mask {
-        let seed: Vec<bool> = aif_clipped.chunks_exact(3).map(|c| c.iter().any(|&b| b)).collect();
+        let seed: Vec<bool> = aif_clipped
+            .chunks_exact(3)
+            .map(|c| c.iter().any(|&b| b))
+            .collect();
         let reach = dilate(&seed, w, h, k_full * max_rel + 2.0);
         for (e, r) in excluded.iter_mut().zip(&reach) {
             *e |= *r;
@@ -323,7 +331,11 @@ pub fn estimate_disparity<T: Real>(
         let start: Vec<f64> = match (&current, &options.initial_disparity) {
             (Some((d, sw, sh)), _) => upsample(d, *sw, *sh, lw, lh),
             (None, Some(map)) => {
-                let mut d: Vec<f64> = map.data.iter().map(|&v| (v as f64).clamp(0.0, 1.0)).collect();
+                let mut d: Vec<f64> = map
+                    .data
+                    .iter()
+                    .map(|&v| (v as f64).clamp(0.0, 1.0))
+                    .collect();
                 let (mut mw, mut mh) = (w, h);
                 for _ in 0..scale {
                     d = pool(&d, mw, mh, 1);
@@ -344,7 +356,8 @@ pub fn estimate_disparity<T: Real>(
                     fs.camera.window = Window::auto_unclipped(fs.camera.blur_k * max_rel + 1.0);
                     let aif: Image<T> = encode_image(&aif_at(finest, &log_gain), fw, fh, &tone);
                     let ft: Image<T> = to_image(&fl.target, fw, fh, 3);
-                    let radius = ((fs.camera.blur_k * max_rel / 2.0).round() as usize).max(SWEEP_RADIUS);
+                    let radius =
+                        ((fs.camera.blur_k * max_rel / 2.0).round() as usize).max(SWEEP_RADIUS);
                     let mut d = sweep(options, &fs, &aif, &ft, &fl.excluded, n, radius)?;
                     let (mut mw, mut mh) = (fw, fh);
                     for _ in finest..scale {
@@ -366,6 +379,17 @@ pub fn estimate_disparity<T: Real>(
             sched.fine_iterations
         } else {
             sched.iterations
+        };
+        // The smoothness guide: the clipped all-in-focus image at this scale, scaled by the
+        // edge sensitivity (G's edge weight becomes exp(-sensitivity |dI|)).
+        let guide: Image<T> = {
+            let g: Image<T> =
+                encode_image(&aif_at(scale, &vec![0.0; clipped_idx.len()]), lw, lh, &tone);
+            let k = T::c(options.edge_sensitivity);
+            Image {
+                data: g.data.iter().map(|&v| v.min(T::one()) * k).collect(),
+                ..g
+            }
         };
         let (mut best, mut best_at) = (f64::INFINITY, 0usize);
         let mut iterations = 0;
@@ -395,7 +419,7 @@ pub fn estimate_disparity<T: Real>(
             )?;
             let mut grad: Vec<f64> = vjp.d_disparity.data.iter().map(|v| v.f64()).collect();
             if use_smooth {
-                let (val, gs) = loss::edge_aware_smoothness_grad(&disp_img, &aif)?;
+                let (val, gs) = loss::edge_aware_smoothness_grad(&disp_img, &guide)?;
                 entry.smoothness = Some(val.f64());
                 entry.loss += options.weights.smoothness * val.f64();
                 for (a, b) in grad.iter_mut().zip(&gs.data) {
@@ -463,44 +487,67 @@ pub fn estimate_disparity<T: Real>(
         });
         current = Some((disp, lw, lh));
     }
-    let (disp, sw, sh) = current.expect("at least one scale");
-    let disp = if (sw, sh) == (w, h) {
-        disp
-    } else {
-        upsample(&disp, sw, sh, w, h)
-    };
-    let disparity: Image<T> = to_image(&disp, w, h, 1);
+    let (mut disp_f, fw, fh) = current.expect("at least one scale");
+    if let Some(m) = options.median {
+        let guide: Vec<[f64; 3]> = aif_at(finest, &vec![0.0; clipped_idx.len()])
+            .chunks_exact(3)
+            .map(|p| [0, 1, 2].map(|c| tone.encode(p[c].max(0.0)).min(1.0)))
+            .collect();
+        let reach = k_full / (1u64 << finest) as f64 * max_rel;
+        let r = ((m.radius_blur_fraction * reach).round() as usize).max(1);
+        disp_f = weighted_median(&disp_f, &guide, fw, fh, r, m.sigma);
+    }
 
-    // Confidence: the render's sensitivity to disparity.
-    let aif_full: Image<T> = encode_image(&aif_at(0, &log_gain), w, h, &tone);
+    // Confidence, at the finest scale optimised: the render's sensitivity to disparity.
+    let aif_f: Image<T> = encode_image(&aif_at(finest, &log_gain), fw, fh, &tone);
     let mut settings = options.settings.clone();
-    settings.camera.window = Window::auto_unclipped(k_full * max_rel + 1.0);
+    settings.camera.blur_k = k_full / (1u64 << finest) as f64;
+    settings.camera.window = Window::auto_unclipped(settings.camera.blur_k * max_rel + 1.0);
     let shifted = |delta: f64| -> Result<Image<T>> {
-        let d: Vec<f64> = disp.iter().map(|&v| (v + delta).clamp(0.0, 1.0)).collect();
+        let d: Vec<f64> = disp_f
+            .iter()
+            .map(|&v| (v + delta).clamp(0.0, 1.0))
+            .collect();
         render_layer_on(
             options.layer,
             options.engine,
-            &aif_full,
-            &to_image(&d, w, h, 1),
+            &aif_f,
+            &to_image(&d, fw, fh, 1),
             &settings,
         )
     };
     let (up, down) = (shifted(CONFIDENCE_STEP)?, shifted(-CONFIDENCE_STEP)?);
-    let sens: Vec<f64> = (0..w * h)
+    let sens: Vec<f64> = (0..fw * fh)
         .map(|i| {
-            let span = ((disp[i] + CONFIDENCE_STEP).min(1.0) - (disp[i] - CONFIDENCE_STEP).max(0.0))
-                .max(1e-6);
+            let span = ((disp_f[i] + CONFIDENCE_STEP).min(1.0)
+                - (disp_f[i] - CONFIDENCE_STEP).max(0.0))
+            .max(1e-6);
             (0..3)
                 .map(|c| (up.data[3 * i + c].f64() - down.data[3 * i + c].f64()).abs())
                 .sum::<f64>()
                 / (3.0 * span)
         })
         .collect();
-    let sens = box_mean(&sens, w, h, CONFIDENCE_RADIUS);
+    let sens = box_mean(&sens, fw, fh, CONFIDENCE_RADIUS);
     let conf: Vec<f64> = sens
         .iter()
         .map(|&s| s / (s + CONFIDENCE_HALF_SENSITIVITY))
         .collect();
+    let (disp, conf) = if (fw, fh) == (w, h) {
+        (disp_f, conf)
+    } else {
+        let mut d = upsample(&disp_f, fw, fh, w, h);
+        if let Some(m) = options.median {
+            // Snap the upsampled edges onto the full-resolution colour edges.
+            let guide: Vec<[f64; 3]> = aif_lin
+                .chunks_exact(3)
+                .map(|p| [0, 1, 2].map(|c| tone.encode(p[c].max(0.0)).min(1.0)))
+                .collect();
+            d = weighted_median(&d, &guide, w, h, 1 << finest, m.sigma);
+        }
+        (d, upsample(&conf, fw, fh, w, h))
+    };
+    let disparity: Image<T> = to_image(&disp, w, h, 1);
 
     let log = DfdLog {
         schema_version: DFD_LOG_SCHEMA_VERSION,
@@ -523,7 +570,6 @@ pub fn estimate_disparity<T: Real>(
         log,
     })
 }
-
 
 #[cfg(test)]
 mod tests {

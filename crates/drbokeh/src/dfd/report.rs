@@ -269,11 +269,7 @@ small { color: #666; font-weight: normal; }
 }
 
 /// Writes `results.json`, `results.md` and `index.html` into `out` (which must exist).
-pub fn write_report(
-    out: &Path,
-    report: &DfdBenchmarkReport,
-    methods: &[DfdMethod],
-) -> Result<()> {
+pub fn write_report(out: &Path, report: &DfdBenchmarkReport, methods: &[DfdMethod]) -> Result<()> {
     let json = serde_json::to_string_pretty(report)
         .map_err(|e| Error::file(out.join("results.json"), e.to_string()))?;
     write_text(&out.join("results.json"), &(json + "\n"))?;

@@ -100,4 +100,3 @@ fn guided_mean(data: &[f64], guide: &[[f64; 3]], w: usize, h: usize, r: usize) -
         })
         .collect()
 }
-

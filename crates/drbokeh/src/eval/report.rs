@@ -21,8 +21,8 @@
 //! metric (`psnr_vs_blur.svg`, ...) and `index.html` (see `docs/evaluation.md` for the
 //! schema); [`write_scene_images`] writes the pictures the gallery shows.
 
-use crate::baselines::{self, Baseline};
 use super::metrics;
+use crate::baselines::{self, Baseline};
 use crate::camera::{Camera, Window, AUTO_WINDOW_MARGIN_PX, MAX_WINDOW_SIZE};
 use crate::image::Image;
 use crate::io;
