@@ -6,7 +6,7 @@ use clap::Args;
 use drbokeh::dfd::benchmark::{self, DfdBenchmarkConfig, DfdLayer, LossCombo, SceneGroup};
 use drbokeh::dfd::experiment::{markdown_table, paper_combos, run_experiment, synthetic_pair};
 use drbokeh::dfd::{
-    estimate_disparity, report, DfdOptions, Highlights, Init, LossWeights, Optimiser,
+    estimate_disparity, report, DfdOptions, Highlights, Init, LossWeights, MedianRefine, Optimiser,
     Parameterisation, RenderLayer,
 };
 use drbokeh::{io, Preset, Progress, RenderSettings};
@@ -61,6 +61,14 @@ pub struct OptimiserArgs {
     /// exp(-s |dI|): larger lets disparity edges form at colour edges (the paper: 1).
     #[arg(long, value_name = "S")]
     pub edge_sensitivity: Option<f64>,
+    /// Window radius of the edge-aware weighted-median refinement of the result, as a
+    /// fraction of the largest blur radius (default 1.5; 0 turns the refinement off).
+    #[arg(long, value_name = "F")]
+    pub median_radius: Option<f64>,
+    /// Colour distance (display-encoded, RMS over channels) at which a neighbour's weight
+    /// in the weighted median falls to exp(-1/2) (default 0.05).
+    #[arg(long, value_name = "SIGMA")]
+    pub median_sigma: Option<f64>,
     /// Gamma of the display encoding.
     #[arg(long, default_value_t = 2.2)]
     pub gamma: f64,
@@ -87,6 +95,23 @@ impl OptimiserArgs {
         o.init = parse_init(&self.init)?;
         if let Some(e) = self.edge_sensitivity {
             o.edge_sensitivity = e;
+        }
+        match self.median_radius {
+            Some(r) if r == 0.0 => o.median = None,
+            Some(r) => {
+                let sigma = o.median.map_or(0.05, |m| m.sigma);
+                o.median = Some(MedianRefine {
+                    radius_blur_fraction: r,
+                    sigma,
+                });
+            }
+            None => {}
+        }
+        if let Some(sigma) = self.median_sigma {
+            match o.median.as_mut() {
+                Some(m) => m.sigma = sigma,
+                None => bail!("invalid parameter --median-sigma: the median refinement is off (--median-radius 0)"),
+            }
         }
         o.settings.camera.gamma = self.gamma;
         o.engine = self.engine.parse()?;
