@@ -96,16 +96,15 @@ impl OptimiserArgs {
         if let Some(e) = self.edge_sensitivity {
             o.edge_sensitivity = e;
         }
-        match self.median_radius {
-            Some(r) if r == 0.0 => o.median = None,
-            Some(r) => {
-                let sigma = o.median.map_or(0.05, |m| m.sigma);
-                o.median = Some(MedianRefine {
+        if let Some(r) = self.median_radius {
+            o.median = if r == 0.0 {
+                None
+            } else {
+                Some(MedianRefine {
                     radius_blur_fraction: r,
-                    sigma,
-                });
-            }
-            None => {}
+                    sigma: o.median.map_or(0.05, |m| m.sigma),
+                })
+            };
         }
         if let Some(sigma) = self.median_sigma {
             match o.median.as_mut() {

@@ -5,8 +5,8 @@
 //! - [`RenderLayer::DrBokeh`]: our renderer on a single opaque layer, with the settings'
 //!   preset (`physical` or `paper`), through the public [`crate::render_with_tape_on`] and
 //!   [`crate::Tape::backward`].
-//! - [`RenderLayer::GaussPsf`]: [`crate::baselines::gauss_psf`].
-//! - [`RenderLayer::Aperture`]: [`crate::baselines::aperture_compositing`].
+//! - [`RenderLayer::GaussPsf`]: the Gaussian-PSF layer, [`crate::baselines::gauss_psf`].
+//! - [`RenderLayer::Aperture`]: aperture compositing, [`crate::baselines::aperture_compositing`].
 
 use crate::baselines::{aperture_compositing, gauss_psf, LayerVjp};
 use crate::image::Image;

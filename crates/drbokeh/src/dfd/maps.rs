@@ -136,6 +136,62 @@ pub(super) fn encode_image<T: Real>(lin: &[f64], w: usize, h: usize, tone: &Tone
     }
 }
 
+/// Bins of [`weighted_median`]'s histogram over [0, 1].
+const MEDIAN_BINS: usize = 256;
+
+/// Edge-aware weighted median of a one-channel map with values in [0, 1] over a
+/// `(2r+1)^2` window: each neighbour `y` of `x` weighs `exp(-|I(x) - I(y)|^2 / (2
+/// sigma^2))` (`|.|^2` the mean over channels of the guide's squared difference), and `x`
+/// takes the value where the cumulative weight reaches one half. Values are binned into
+/// [`MEDIAN_BINS`] bins, and the result is the centre of the median bin, refined linearly
+/// within it.
+pub(super) fn weighted_median(
+    data: &[f64],
+    guide: &[[f64; 3]],
+    w: usize,
+    h: usize,
+    r: usize,
+    sigma: f64,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    let inv = 1.0 / (2.0 * 3.0 * sigma * sigma);
+    let bin_of = |v: f64| ((v.clamp(0.0, 1.0) * MEDIAN_BINS as f64) as usize).min(MEDIAN_BINS - 1);
+    let bins: Vec<usize> = data.iter().map(|&v| bin_of(v)).collect();
+    (0..w * h)
+        .into_par_iter()
+        .map_init(
+            || vec![0.0f64; MEDIAN_BINS],
+            |hist, i| {
+                hist.iter_mut().for_each(|v| *v = 0.0);
+                let (x, y) = (i % w, i / w);
+                let g = guide[i];
+                let mut total = 0.0;
+                for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                    for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                        let j = yy * w + xx;
+                        let q = guide[j];
+                        let d2 =
+                            (g[0] - q[0]).powi(2) + (g[1] - q[1]).powi(2) + (g[2] - q[2]).powi(2);
+                        let wt = (-d2 * inv).exp();
+                        hist[bins[j]] += wt;
+                        total += wt;
+                    }
+                }
+                let half = 0.5 * total;
+                let mut acc = 0.0;
+                for (b, &v) in hist.iter().enumerate() {
+                    if acc + v >= half && v > 0.0 {
+                        let t = ((half - acc) / v).clamp(0.0, 1.0);
+                        return (b as f64 + t) / MEDIAN_BINS as f64;
+                    }
+                    acc += v;
+                }
+                data[i]
+            },
+        )
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,60 +278,4 @@ mod tests {
         let d = dilate(&seed, w, h, 3.0);
         assert!(d[5 * w + 8] && d[8 * w + 5] && !d[5 * w + 9] && !d[8 * w + 8]);
     }
-}
-
-/// Bins of [`weighted_median`]'s histogram over [0, 1].
-const MEDIAN_BINS: usize = 256;
-
-/// Edge-aware weighted median of a one-channel map with values in [0, 1] over a
-/// `(2r+1)^2` window: each neighbour `y` of `x` weighs `exp(-|I(x) - I(y)|^2 / (2
-/// sigma^2))` (`|.|^2` the mean over channels of the guide's squared difference), and `x`
-/// takes the value where the cumulative weight reaches one half. Values are binned into
-/// [`MEDIAN_BINS`] bins, and the result is the centre of the median bin, refined linearly
-/// within it.
-pub(super) fn weighted_median(
-    data: &[f64],
-    guide: &[[f64; 3]],
-    w: usize,
-    h: usize,
-    r: usize,
-    sigma: f64,
-) -> Vec<f64> {
-    use rayon::prelude::*;
-    let inv = 1.0 / (2.0 * 3.0 * sigma * sigma);
-    let bin_of = |v: f64| ((v.clamp(0.0, 1.0) * MEDIAN_BINS as f64) as usize).min(MEDIAN_BINS - 1);
-    let bins: Vec<usize> = data.iter().map(|&v| bin_of(v)).collect();
-    (0..w * h)
-        .into_par_iter()
-        .map_init(
-            || vec![0.0f64; MEDIAN_BINS],
-            |hist, i| {
-                hist.iter_mut().for_each(|v| *v = 0.0);
-                let (x, y) = (i % w, i / w);
-                let g = guide[i];
-                let mut total = 0.0;
-                for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-                    for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
-                        let j = yy * w + xx;
-                        let q = guide[j];
-                        let d2 =
-                            (g[0] - q[0]).powi(2) + (g[1] - q[1]).powi(2) + (g[2] - q[2]).powi(2);
-                        let wt = (-d2 * inv).exp();
-                        hist[bins[j]] += wt;
-                        total += wt;
-                    }
-                }
-                let half = 0.5 * total;
-                let mut acc = 0.0;
-                for (b, &v) in hist.iter().enumerate() {
-                    if acc + v >= half && v > 0.0 {
-                        let t = ((half - acc) / v).clamp(0.0, 1.0);
-                        return (b as f64 + t) / MEDIAN_BINS as f64;
-                    }
-                    acc += v;
-                }
-                data[i]
-            },
-        )
-        .collect()
 }

@@ -101,7 +101,7 @@ impl Parameterisation {
             Parameterisation::Sigmoid => sigmoid(p),
         }
     }
-    fn from_disparity(self, d: f64) -> f64 {
+    fn variable_of(self, d: f64) -> f64 {
         match self {
             Parameterisation::Clamped => d.clamp(0.0, 1.0),
             Parameterisation::Sigmoid => logit(d),
@@ -369,7 +369,7 @@ pub fn estimate_disparity<T: Real>(
                 }
             },
         };
-        let mut p: Vec<f64> = start.iter().map(|&d| param.from_disparity(d)).collect();
+        let mut p: Vec<f64> = start.iter().map(|&d| param.variable_of(d)).collect();
         let mut adam = Adam::new(p.len());
         let lr = sched.learning_rate
             * sched
@@ -579,7 +579,7 @@ mod tests {
     fn parameterisations_round_trip() {
         for p in [Parameterisation::Clamped, Parameterisation::Sigmoid] {
             for d in [0.05, 0.3, 0.5, 0.95] {
-                assert!((p.to_disparity(p.from_disparity(d)) - d).abs() < 1e-9);
+                assert!((p.to_disparity(p.variable_of(d)) - d).abs() < 1e-9);
             }
         }
         // The sigmoid's derivative against a finite difference.
