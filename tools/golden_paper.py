@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Independent evaluation of the `paper` model (shared/spec/rendering-model.md) on a tiny
-5x5 two-layer stack, in plain Python (no numpy), written from the spec's formulas only.
+"""Independent evaluation of the `paper` model (docs/model.md) on a tiny 5x5 two-layer
+stack, in plain Python (no numpy), written from that page's formulas only.
 Its output is embedded in crates/drbokeh/tests/render.rs (test `golden_5x5_two_layers`).
 Run: python3 tools/golden_paper.py
 """

@@ -2,9 +2,10 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use drbokeh::io::{self, DepthKind, DisparityOptions};
-use drbokeh::{Aperture, Camera, LayerStack, Preset, Real, RenderSettings, Window};
-use std::path::{Path, PathBuf};
+use drbokeh::io::{DepthKind, DisparityOptions};
+use drbokeh::scene::{self, Focus, Layering, PhotoFiles, Scene, Source, View};
+use drbokeh::Real;
+use std::path::PathBuf;
 
 /// Where the scene comes from.
 #[derive(Args, Debug, Clone)]
@@ -70,7 +71,7 @@ pub enum DepthKindArg {
 #[derive(Args, Debug, Clone)]
 pub struct CameraArgs {
     /// Focus disparity in [0, 1] (the normalised disparity that is sharp).
-    #[arg(long, value_name = "F", conflicts_with = "focus_at")]
+    #[arg(long, value_name = "F", conflicts_with = "focus_at", value_parser = crate::values::focus)]
     pub focus: Option<f64>,
 
     /// Tap to focus: focus on the disparity at pixel X,Y (frontmost layer with alpha >= 0.5).
@@ -142,11 +143,7 @@ pub struct ExecArgs {
 impl ExecArgs {
     /// The engine to use: `auto` resolves to fast in f32 and threaded in f64.
     pub fn engine(&self) -> Result<drbokeh::Engine> {
-        Ok(match self.engine.as_str() {
-            "auto" if self.f64 => drbokeh::Engine::Threaded,
-            "auto" => drbokeh::Engine::Fast,
-            other => other.parse()?,
-        })
+        Ok(drbokeh::Engine::parse_or_auto(&self.engine, self.f64)?)
     }
 
     /// Sets up the global thread pool.
@@ -178,215 +175,146 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
             .parse()
             .with_context(|| format!("invalid parameter --demo-size: bad number '{v}'"))
     };
-    let (w, h) = (parse(w)?, parse(h)?);
-    drbokeh::image::check_dimensions("--demo-size", w, h)?;
-    Ok((w, h))
+    Ok((parse(w)?, parse(h)?))
 }
 
-/// Loads the scene as a layer stack.
-/// The display transfer the camera options and preset imply (used to read linear EXR
-/// inputs into display encoding before rendering).
-pub fn tone_for(c: &CameraArgs) -> Result<drbokeh::model::Tone> {
-    let preset: Preset = c.preset.parse()?;
-    Ok(drbokeh::model::Tone::new(
-        preset.options().transfer,
-        c.gamma,
-        c.offset,
-    ))
-}
-
-/// A scene as read from the command line: a ready stack, or an image and disparity map
-/// to decompose into layers.
-enum Parts<T> {
-    Stack(LayerStack<T>),
-    Decompose {
-        rgb: drbokeh::Image<T>,
-        disparity: drbokeh::Image<T>,
-    },
-}
-
-/// The automatic decomposition's options from the scene arguments.
-fn layering_options(a: &SceneArgs) -> drbokeh::layering::LayeringOptions {
-    drbokeh::layering::LayeringOptions {
-        max_layers: a
-            .max_layers
-            .unwrap_or(drbokeh::layering::DEFAULT_MAX_LAYERS),
-        ..Default::default()
-    }
-}
-
-/// Loads the scene for a render with these camera options. Unless `--single-layer`, an image
-/// is decomposed for the render's focus and blur (cuts that cannot change the render are
-/// left out); returns the stack and the decomposition's notes for the user (e.g. why it
-/// fell back to a single layer).
-pub fn load_scene_for_render<T: Real>(
-    a: &SceneArgs,
-    c: &CameraArgs,
-    engine: drbokeh::Engine,
-) -> Result<(LayerStack<T>, Vec<String>)> {
-    match load_parts(a, tone_for(c)?)? {
-        Parts::Stack(s) => Ok((s, vec![])),
-        Parts::Decompose { rgb, disparity } => {
-            // Focus and blur as they resolve on the single-layer stack (same disparity).
-            let single = LayerStack::single(rgb.clone(), disparity.clone())?;
-            let (settings, _) = settings_for(c, a, &single, engine)?;
-            let mut opts = layering_options(a);
-            opts.focus_hint = Some((
-                settings.camera.focus_disparity,
-                settings.camera.blur_k.abs(),
-            ));
-            let d = drbokeh::layering::layers_from_disparity(&rgb, &disparity, &opts)?;
-            Ok((d.stack, d.notes))
+impl SceneArgs {
+    /// The scene these arguments name (files are read by [`scene::resolve`]).
+    pub fn source<T: Real>(&self) -> Result<Source<T>> {
+        if self.demo {
+            let (width, height) = parse_size(&self.demo_size)?;
+            return Ok(Source::Demo { width, height });
         }
-    }
-}
-
-fn load_parts<T: Real>(a: &SceneArgs, tone: drbokeh::model::Tone) -> Result<Parts<T>> {
-    if a.demo {
-        let (w, h) = parse_size(&a.demo_size)?;
-        return Ok(Parts::Stack(drbokeh::demo::scene(w, h)));
-    }
-    if let Some(p) = &a.layers {
-        return Ok(Parts::Stack(io::read_stack(p)?));
-    }
-    let Some(image_path) = &a.image else {
-        bail!("no scene given: use --layers STACK.npz, --image IMAGE --disparity MAP, or --demo");
-    };
-    let (map_path, implied) = match (&a.disparity, &a.depth) {
-        (Some(p), None) => (p, DepthKind::Disparity),
-        (None, Some(p)) => (p, DepthKind::Depth),
-        _ => bail!("--image needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"),
-    };
-    let kind = match a.depth_kind {
-        Some(DepthKindArg::Disparity) => DepthKind::Disparity,
-        Some(DepthKindArg::Depth) => DepthKind::Depth,
-        None => implied,
-    };
-    let mut rgb: drbokeh::Image<T> = io::read_rgb(image_path)?;
-    if image_path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
-    {
-        // Linear EXR colour: encode with the same transfer the renderer will undo.
-        for v in rgb.data.iter_mut() {
-            *v = T::c(tone.encode(v.f64()).max(0.0));
+        if let Some(p) = &self.layers {
+            return Ok(Source::StackFile(p.clone()));
         }
-    }
-    let disparity = io::read_disparity(
-        map_path,
-        DisparityOptions {
-            kind,
-            normalize: !a.no_normalize,
-        },
-    )?;
-    check_same_size(image_path, &rgb, map_path, &disparity)?;
-    match &a.alpha {
-        None if a.single_layer => Ok(Parts::Stack(LayerStack::single(rgb, disparity)?)),
-        None => Ok(Parts::Decompose { rgb, disparity }),
-        Some(matte_path) => {
-            let matte = io::read_matte(matte_path)?;
-            check_same_size(image_path, &rgb, matte_path, &matte)?;
-            Ok(Parts::Stack(drbokeh::layering::two_layers_from_matte(
-                &rgb, &disparity, &matte,
-            )?))
-        }
-    }
-}
-
-/// Fails unless two images (read from the named files) have the same size.
-pub fn check_same_size<A, B>(
-    a_path: &Path,
-    a: &drbokeh::Image<A>,
-    b_path: &Path,
-    b: &drbokeh::Image<B>,
-) -> Result<()> {
-    if a.width != b.width || a.height != b.height {
-        bail!(
-            "{}: size {}x{} does not match {} ({}x{})",
-            b_path.display(),
-            b.width,
-            b.height,
-            a_path.display(),
-            a.width,
-            a.height
-        );
-    }
-    Ok(())
-}
-
-/// Resolves the camera, aperture and preset for a loaded stack. Returns the settings and,
-/// when the automatic window clips the largest blur, a note for the user.
-pub fn settings_for<T: Real>(
-    c: &CameraArgs,
-    scene: &SceneArgs,
-    stack: &LayerStack<T>,
-    engine: drbokeh::Engine,
-) -> Result<(RenderSettings, Option<String>)> {
-    let focus = match (c.focus, &c.focus_at) {
-        (Some(f), _) => f,
-        (None, Some(xy)) => {
-            let (x, y) = xy
-                .split_once(',')
-                .and_then(|(x, y)| Some((x.trim().parse().ok()?, y.trim().parse().ok()?)))
-                .with_context(|| {
-                    format!(
-                        "invalid parameter --focus-at: expected X,Y pixel coordinates, got '{xy}'"
-                    )
-                })?;
-            stack.disparity_at(x, y)?
-        }
-        (None, None) if scene.demo => drbokeh::demo::DEMO_FOCUS,
-        (None, None) => stack.disparity_at(stack.width / 2, stack.height / 2)?,
-    };
-    let aperture = match c.aperture.strip_prefix("kernel:") {
-        Some(path) => {
-            let grey = io::read_grey::<f64>(Path::new(path), "aperture kernel")?;
-            Aperture::Kernel(
-                drbokeh::aperture::KernelImage::new(&grey)
-                    .map_err(|e| e.in_file(Path::new(path)))?,
-            )
-        }
-        None => Aperture::parse_shape(&c.aperture)?,
-    };
-    let preset: Preset = c.preset.parse()?;
-    let mut note = None;
-    let window = match c.window {
-        Some(l) => Window::from_size(l)?,
-        None => {
-            if !(0.0..=1.0).contains(&focus) || !focus.is_finite() {
-                // Let validation below report it.
-                Window::auto(1.0)
+        let Some(image) = &self.image else {
+            bail!(
+                "no scene given: use --layers STACK.npz, --image IMAGE --disparity MAP, or --demo"
+            );
+        };
+        let (map, implied) = match (&self.disparity, &self.depth) {
+            (Some(p), None) => (p, DepthKind::Disparity),
+            (None, Some(p)) => (p, DepthKind::Depth),
+            _ => bail!(
+                "--image needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"
+            ),
+        };
+        let kind = match self.depth_kind {
+            Some(DepthKindArg::Disparity) => DepthKind::Disparity,
+            Some(DepthKindArg::Depth) => DepthKind::Depth,
+            None => implied,
+        };
+        Ok(Source::PhotoFiles(PhotoFiles {
+            image: image.clone(),
+            map: map.clone(),
+            map_options: DisparityOptions {
+                kind,
+                normalize: !self.no_normalize,
+            },
+            matte: self.alpha.clone(),
+            layering: if self.single_layer {
+                Layering::SingleLayer
             } else {
-                let needed = c.blur_k.abs() * stack.max_defocus(focus) + 1.0;
-                let w = if engine == drbokeh::Engine::Fast {
-                    Window::auto_unclipped(needed)
-                } else {
-                    Window::auto(needed)
-                };
-                if needed + drbokeh::camera::AUTO_WINDOW_MARGIN_PX > w.radius_px() as f64 + 0.5 {
-                    note = Some(format!(
-                        "largest blur radius is {needed:.1} px but the automatic window is capped at L = {} (R = {}); pass --window {} (or use the fast engine) for unclipped bokeh",
-                        w.size(),
-                        w.radius_px(),
-                        2 * (needed + drbokeh::camera::AUTO_WINDOW_MARGIN_PX).ceil() as usize + 1
-                    ));
+                Layering::Decompose {
+                    max_layers: self
+                        .max_layers
+                        .unwrap_or(drbokeh::layering::DEFAULT_MAX_LAYERS),
                 }
-                w
+            },
+        }))
+    }
+}
+
+impl CameraArgs {
+    /// The view these arguments state (the aperture kernel, if any, is read here).
+    pub fn view(&self) -> Result<View> {
+        let focus = match (self.focus, &self.focus_at) {
+            (Some(f), _) => Focus::Disparity(f),
+            (None, Some(xy)) => {
+                let (x, y) = xy
+                    .split_once(',')
+                    .and_then(|(x, y)| Some((x.trim().parse().ok()?, y.trim().parse().ok()?)))
+                    .with_context(|| {
+                        format!(
+                            "invalid parameter --focus-at: expected X,Y pixel coordinates, got '{xy}'"
+                        )
+                    })?;
+                Focus::At { x, y }
             }
+            (None, None) => Focus::Auto,
+        };
+        Ok(View {
+            focus,
+            blur_k: self.blur_k,
+            window: self.window,
+            gamma: self.gamma,
+            offset: self.offset,
+            highlight: self.highlight,
+            aperture: scene::parse_aperture(&self.aperture)?,
+            preset: self.preset.parse()?,
+        })
+    }
+}
+
+/// Resolves the scene and view of a rendering command for `engine`: the stack (an image
+/// decomposed for this focus and blur unless `--single-layer`), its settings and the
+/// notes for the user.
+pub fn resolve<T: Real>(
+    scene_args: &SceneArgs,
+    camera: &CameraArgs,
+    engine: drbokeh::Engine,
+) -> Result<Scene<T>> {
+    let view = camera.view()?;
+    Ok(scene::resolve(scene_args.source()?, &view, engine)?)
+}
+
+/// The command-line flag of a library parameter name (`focus` -> `--focus`), for the
+/// parameters that are flags.
+pub fn flag_for(parameter: &str) -> Option<&'static str> {
+    Some(match parameter {
+        "focus" => "--focus",
+        "focus_at" => "--focus-at",
+        "blur" => "--blur",
+        "window" => "--window",
+        "gamma" => "--gamma",
+        "offset" => "--offset",
+        "aperture" => "--aperture",
+        "preset" => "--preset",
+        "engine" => "--engine",
+        "max_layers" => "--max-layers",
+        "jump" => "--jump",
+        "band" => "--band",
+        "demo_size" => "--demo-size",
+        "methods" => "--methods",
+        "focal_planes" => "--focal-planes",
+        _ => return None,
+    })
+}
+
+/// The one-line message of an error: its chain, outermost first, joined by `: `, with the
+/// library's parameter names spelled as flags. A library error ends the chain (its message
+/// already includes its source's).
+pub fn describe(e: &anyhow::Error) -> String {
+    let mut parts = Vec::new();
+    for cause in e.chain() {
+        match cause.downcast_ref::<drbokeh::Error>() {
+            Some(drbokeh::Error::InvalidParameter { name, problem }) => {
+                let name = flag_for(name).unwrap_or(name);
+                parts.push(format!("invalid parameter {name}: {problem}"));
+                break;
+            }
+            Some(drbokeh::Error::InvalidInput { what, problem }) => {
+                let what = flag_for(what).unwrap_or(what);
+                parts.push(format!("{what}: {problem}"));
+                break;
+            }
+            Some(other) => {
+                parts.push(other.to_string());
+                break;
+            }
+            None => parts.push(cause.to_string()),
         }
-    };
-    let settings = RenderSettings {
-        camera: Camera {
-            focus_disparity: focus,
-            blur_k: c.blur_k,
-            window,
-            gamma: c.gamma,
-            offset: c.offset,
-            highlight: c.highlight,
-        },
-        aperture,
-        preset,
-    };
-    settings.validate()?;
-    Ok((settings, note))
+    }
+    parts.join(": ")
 }

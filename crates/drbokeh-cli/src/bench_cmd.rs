@@ -3,7 +3,7 @@
 use anyhow::Result;
 use clap::Args;
 use drbokeh::bench::{
-    adjoint_workload, run_adjoint, run_workload, workloads, AdjointRow, BenchRow,
+    adjoint_workload, run_adjoint, run_workload, workloads_where, AdjointRow, BenchRow,
 };
 use std::path::PathBuf;
 
@@ -77,18 +77,27 @@ fn print_adjoint(r: &AdjointRow) {
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
+    let matches = |name: &str| a.only.as_ref().map_or(true, |o| name.contains(o.as_str()));
+    let names = drbokeh::bench::workload_names(a.quick);
+    if !names.iter().any(|n| matches(n)) && !matches(drbokeh::bench::ADJOINT_WORKLOAD_NAME) {
+        anyhow::bail!(
+            "invalid parameter --only: '{}' matches no workload (names: {}, {})",
+            a.only.as_deref().unwrap_or(""),
+            names.join(", "),
+            drbokeh::bench::ADJOINT_WORKLOAD_NAME
+        );
+    }
+    if let Some(p) = &a.json {
+        drbokeh::io::OutputPlan::new()
+            .file(p, "--json", &["json"])
+            .check()?;
+    }
     crate::args::init_threads(a.threads)?;
     println!("threads: {}", rayon::current_num_threads());
     println!("| workload | MP | layers | K | L | engine | seconds | taps | taps/s | speed-up vs threaded | max diff (linear) | disc area |");
     println!("| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |");
     let mut rows = Vec::new();
-    for w in workloads(a.quick) {
-        if a.only
-            .as_ref()
-            .is_some_and(|o| !w.name.contains(o.as_str()))
-        {
-            continue;
-        }
+    for w in workloads_where(a.quick, matches) {
         rows.extend(run_workload(&w, &mut print_row)?);
     }
     let aw = adjoint_workload();

@@ -163,7 +163,7 @@ pub struct DfdArgs {
     #[arg(long, value_name = "IMAGE")]
     pub defocused: PathBuf,
     /// Focus disparity of the defocused image, in [0, 1] (1 = nearest).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::values::focus)]
     pub focus: f64,
     /// Blur strength K of the defocused image (pixels of blur radius per unit disparity).
     #[arg(long = "blur", value_name = "K")]
@@ -210,45 +210,7 @@ fn with_suffix(p: &Path, suffix: &str) -> PathBuf {
     p.with_file_name(format!("{stem}{suffix}"))
 }
 
-fn extension(p: &Path) -> String {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase()
-}
-
-/// Fails unless `path`'s directory exists and `path` is none of `inputs`.
-fn check_output(path: &Path, inputs: &[&Path]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    if !dir.is_dir() {
-        bail!("{}: output directory does not exist", path.display());
-    }
-    let canon = |p: &Path| -> Option<PathBuf> {
-        let parent = match p.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        Some(parent.canonicalize().ok()?.join(p.file_name()?))
-    };
-    let out = canon(path);
-    for i in inputs {
-        if out.is_some() && canon(i) == out {
-            bail!("{}: output would overwrite an input", path.display());
-        }
-    }
-    Ok(())
-}
-
 pub fn run(a: &DfdArgs) -> Result<()> {
-    if !["png", "npy", "exr"].contains(&extension(&a.output).as_str()) {
-        bail!(
-            "{}: unsupported output extension (use .png, .npy or .exr)",
-            a.output.display()
-        );
-    }
     let log_path = a
         .log
         .clone()
@@ -261,26 +223,17 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         .confidence
         .clone()
         .unwrap_or_else(|| with_suffix(&a.output, ".confidence.png"));
-    if extension(&preview) != "png" {
-        bail!("{}: the preview must be a .png", preview.display());
-    }
-    if !["png", "npy", "exr"].contains(&extension(&confidence).as_str()) {
-        bail!(
-            "{}: unsupported confidence extension (use .png, .npy or .exr)",
-            confidence.display()
-        );
-    }
-    let mut inputs = vec![a.all_in_focus.as_path(), a.defocused.as_path()];
+    let mut plan = io::OutputPlan::new();
+    plan.input(&a.all_in_focus, "--all-in-focus")
+        .input(&a.defocused, "--defocused");
     if let Some(i) = &a.initial_disparity {
-        inputs.push(i.as_path());
+        plan.input(i, "--initial-disparity");
     }
-    let outputs = [&a.output, &log_path, &preview, &confidence];
-    for (i, o) in outputs.iter().enumerate() {
-        check_output(o, &inputs)?;
-        if outputs[..i].contains(o) {
-            bail!("{}: two outputs share this path", o.display());
-        }
-    }
+    plan.file(&a.output, "--output", &["png", "npy", "exr"])
+        .file(&confidence, "--confidence", &["png", "npy", "exr"])
+        .file(&log_path, "--log", &[])
+        .file(&preview, "--preview", &["png"])
+        .check()?;
 
     let mut settings = RenderSettings::physical(a.focus);
     settings.preset = a.preset.parse::<Preset>()?;
@@ -290,6 +243,13 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     o.weights = weights;
     o.terms = terms;
     a.opt.apply(&mut o)?;
+    let (w, h) = io::image_dimensions(&a.all_in_focus, "image")?;
+    drbokeh::budget::check_work(
+        &a.all_in_focus.display().to_string(),
+        w as u64,
+        h as u64,
+        drbokeh::budget::DFD_WORK_LAYERS,
+    )?;
 
     let aif = io::read_rgb::<f32>(&a.all_in_focus)?;
     let target = io::read_rgb::<f32>(&a.defocused)?;
@@ -335,7 +295,7 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     );
     let result = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
     bar.finish();
-
+    // All four outputs appear together, once all are written.
     let json = serde_json::to_vec_pretty(&result.log)?;
     let rgb = drbokeh::Image::from_vec(
         result.disparity.width,
@@ -343,14 +303,12 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         3,
         result.disparity.data.iter().flat_map(|&v| [v; 3]).collect(),
     )?;
-    io::write_grey(&a.output, &result.disparity)?;
-    io::write_grey(&confidence, &result.confidence)?;
-    io::write_output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
-    io::write_atomic(&log_path, |w| {
-        use std::io::Write;
-        w.write_all(&json)
-            .map_err(|e| drbokeh::Error::file(&log_path, e.to_string()))
-    })?;
+    let mut staging = io::Staging::new();
+    staging.grey(&a.output, &result.disparity)?;
+    staging.grey(&confidence, &result.confidence)?;
+    staging.output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
+    staging.bytes(&log_path, &json)?;
+    staging.commit()?;
     if !a.quiet {
         let last = result
             .log
@@ -537,7 +495,15 @@ fn run_synthetic(a: &DfdEvalArgs) -> Result<()> {
         .as_deref()
         .unwrap_or("drbokeh,gausspsf,aperture")
         .split(',')
-        .map(|s| s.trim().parse::<RenderLayer>())
+        .map(|s| {
+            s.trim().parse::<RenderLayer>().map_err(|e| match e {
+                // The parser speaks of dfd's --layer; here the option is --layers.
+                drbokeh::Error::InvalidParameter { problem, .. } => {
+                    drbokeh::Error::param("--layers", problem)
+                }
+                e => e,
+            })
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let mut settings = RenderSettings::physical(1.0);
     settings.preset = a.preset.parse::<Preset>()?;

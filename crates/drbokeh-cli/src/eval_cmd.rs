@@ -2,7 +2,7 @@
 //! `drbokeh gallery` (a refocus sweep of arbitrary image + disparity pairs).
 
 use crate::progress::Bar;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use drbokeh::eval::gallery::{self, GalleryOptions};
 use drbokeh::eval::report::{self, Method};
@@ -112,15 +112,22 @@ pub fn run_eval(a: &EvalArgs) -> Result<()> {
     // Fails early, with a clear message, on a missing or empty benchmark.
     let scenes = report::list_scenes(&a.benchmark)?;
     let count = a.limit.map_or(scenes.len(), |n| n.min(scenes.len()));
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    drbokeh::io::OutputPlan::new()
+        .input(&a.benchmark, "--benchmark")
+        .dir(&a.out, "--out", drbokeh::io::DirMode::Merge)
+        .check()?;
+    // The whole report is written into a temporary tree, merged into --out only once
+    // every scene has been evaluated (a corrupt scene leaves nothing behind).
+    let mut staging = drbokeh::io::Staging::new();
+    let root = staging.tree(&a.out)?;
     let start = Instant::now();
     let bar = Bar::new("evaluating", a.quiet);
-    let images = (!a.no_images).then_some(a.out.as_path());
+    let images = (!a.no_images).then_some(root.as_path());
     let rep = report::evaluate_benchmark(&a.benchmark, &methods, images, a.limit, &bar);
     bar.finish();
     let rep = rep?;
-    report::write_report(&a.out, &rep)?;
+    report::write_report(&root, &rep)?;
+    staging.commit()?;
     if !a.quiet {
         eprintln!(
             "drbokeh: evaluated {} methods on {count} scenes in {:.1} s -> {}",
@@ -177,11 +184,19 @@ pub fn run_gallery(a: &GalleryArgs) -> Result<()> {
         gamma: a.gamma,
         methods,
     };
+    drbokeh::io::OutputPlan::new()
+        .input(&a.images, "--images")
+        .dir(&a.out, "--out", drbokeh::io::DirMode::Merge)
+        .check()?;
+    // Written into a temporary tree, merged into --out only once complete.
+    let mut staging = drbokeh::io::Staging::new();
+    let root = staging.tree(&a.out)?;
     let start = Instant::now();
     let bar = Bar::new("gallery", a.quiet);
-    let result = gallery::make_gallery(&inputs, &a.out, &options, &bar);
+    let result = gallery::make_gallery(&inputs, &root, &options, &bar);
     bar.finish();
     result?;
+    staging.commit()?;
     if !a.quiet {
         eprintln!(
             "drbokeh: gallery of {} inputs x {} focal planes x {} methods in {:.1} s -> {}",

@@ -1,11 +1,13 @@
 //! `drbokeh layers`: from a photo (image + disparity, optional matte) to a layer stack.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
-use drbokeh::io::{self, BitDepth, DepthKind, DisparityOptions};
+use drbokeh::io::{self, DepthKind, DisparityOptions};
 use drbokeh::layering::{self, LayeringOptions};
-use drbokeh::{Image, LayerStack};
-use std::path::{Path, PathBuf};
+use drbokeh::model::Tone;
+use drbokeh::presets::Transfer;
+use drbokeh::scene::{self, Layering, Photo, PhotoFiles};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Decompose a photo into a layer stack (no learned model, no downloads).
@@ -61,7 +63,7 @@ pub struct LayersArgs {
     /// Make the stack for a render at this focus disparity (with --blur): cuts where the
     /// nearer side would not be blurred more than the farther one are left out, as
     /// `drbokeh render --image` does.
-    #[arg(long, value_name = "F", requires = "blur")]
+    #[arg(long, value_name = "F", requires = "blur", value_parser = crate::values::focus)]
     pub focus: Option<f64>,
 
     /// The render's blur K (pixels per unit of disparity), with --focus.
@@ -86,16 +88,39 @@ pub struct LayersArgs {
 }
 
 pub fn run(a: &LayersArgs) -> Result<()> {
-    if !a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npz"))
-    {
-        bail!(
-            "{}: the layer stack is written as NPZ: use a .npz output name",
-            a.output.display()
-        );
+    // Every output (the stack and each possible preview) checked before any work.
+    let mut plan = io::OutputPlan::new();
+    plan.input(&a.image, "--image");
+    for (p, option) in [
+        (&a.disparity, "--disparity"),
+        (&a.depth, "--depth"),
+        (&a.alpha, "--alpha"),
+    ] {
+        if let Some(p) = p {
+            plan.input(p, option);
+        }
     }
+    plan.file(&a.output, "--output", &["npz"]);
+    let most_layers = if a.alpha.is_some() {
+        2
+    } else {
+        a.max_layers.clamp(1, 16)
+    };
+    if !a.no_preview {
+        for k in 0..most_layers {
+            plan.file(
+                layering::sibling(&a.output, &format!("layer{k}.png")),
+                "a preview",
+                &["png"],
+            );
+            plan.file(
+                layering::sibling(&a.output, &format!("layer{k}.disparity.png")),
+                "a preview",
+                &["png"],
+            );
+        }
+    }
+    plan.check()?;
     let opts = LayeringOptions {
         max_layers: a.max_layers,
         jump_fraction: a.jump,
@@ -104,55 +129,44 @@ pub fn run(a: &LayersArgs) -> Result<()> {
         ..LayeringOptions::default()
     };
     opts.validate()?;
-    if let Some(n) = a.threads {
-        if n == 0 || n > 1024 {
-            bail!("invalid parameter --threads: must be between 1 and 1024, got {n}");
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("cannot start the thread pool")?;
-    }
-    let (map_path, kind) = match (&a.disparity, &a.depth) {
+    crate::args::init_threads(a.threads)?;
+    let (map, kind) = match (&a.disparity, &a.depth) {
         (Some(p), None) => (p, DepthKind::Disparity),
         (None, Some(p)) => (p, DepthKind::Depth),
         _ => bail!(
             "drbokeh layers needs a disparity map (--disparity MAP) or a depth map (--depth MAP)"
         ),
     };
-    let mut rgb: Image<f32> = io::read_rgb(&a.image)?;
-    if a.image
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
-    {
-        // Linear EXR colour: display-encode with the default transfer (gamma 2.2).
-        for v in rgb.data.iter_mut() {
-            *v = drbokeh::model::encode(*v as f64, 2.2, 0.0).max(0.0) as f32;
-        }
-    }
-    let disparity: Image<f32> = io::read_disparity(
-        map_path,
-        DisparityOptions {
+    let files = PhotoFiles {
+        map_options: DisparityOptions {
             kind,
             normalize: !a.no_normalize,
         },
-    )?;
-    crate::args::check_same_size(&a.image, &rgb, map_path, &disparity)?;
-    let matte: Option<Image<f32>> = match &a.alpha {
-        Some(p) => {
-            let m = io::read_matte(p)?;
-            crate::args::check_same_size(&a.image, &rgb, p, &m)?;
-            Some(m)
-        }
-        None => None,
+        matte: a.alpha.clone(),
+        // What the budget is checked against (the decomposition itself follows `opts`).
+        layering: Layering::Decompose {
+            max_layers: most_layers,
+        },
+        ..PhotoFiles::new(&a.image, map, kind)
     };
+    // Linear EXR colour is display-encoded with the default transfer (gamma 2.2).
+    let tone = Tone::new(Transfer::Gamma, 2.2, 0.0);
+    let photo: Photo<f32> = scene::read_photo(&files, &tone)?;
     let t0 = Instant::now();
-    let d = layering::decompose(&rgb, &disparity, matte.as_ref(), &opts)?;
+    let d = layering::decompose(
+        &photo.rgb_encoded,
+        &photo.disparity,
+        photo.matte.as_ref(),
+        &opts,
+    )?;
     let elapsed = t0.elapsed().as_secs_f64();
-    io::write_stack(&a.output, &d.stack)?;
+    // The stack and its previews appear together, once all are written.
+    let mut staging = io::Staging::new();
+    staging.stack(&a.output, &d.stack)?;
     if !a.no_preview {
-        write_previews(&a.output, &d.stack)?;
+        layering::write_previews(&mut staging, &a.output, &d.stack)?;
     }
+    staging.commit()?;
     if !a.quiet {
         for n in &d.notes {
             eprintln!("drbokeh: note: {n}");
@@ -176,55 +190,6 @@ pub fn run(a: &LayersArgs) -> Result<()> {
             d.stack.height,
             a.output.display()
         );
-    }
-    Ok(())
-}
-
-/// `dir/name.npz` -> `dir/name.SUFFIX`.
-fn sibling(output: &Path, suffix: &str) -> PathBuf {
-    let stem = output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "stack".into());
-    output.with_file_name(format!("{stem}.{suffix}"))
-}
-
-/// Per layer: colour over a checkerboard by alpha, and disparity (rescaled to the stack's
-/// disparity range) as 16-bit grey.
-fn write_previews(output: &Path, stack: &LayerStack<f32>) -> Result<()> {
-    let (w, h) = (stack.width, stack.height);
-    let (lo, hi) = stack
-        .layers
-        .iter()
-        .flat_map(|l| l.disparity.data.iter())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    for (k, l) in stack.layers.iter().enumerate() {
-        let mut over = Image::<f32>::new(w, h, 3);
-        for y in 0..h {
-            for x in 0..w {
-                let a = l.alpha.at(x, y, 0);
-                let checker = if (x / 8 + y / 8) % 2 == 0 { 0.8 } else { 0.55 };
-                for c in 0..3 {
-                    *over.at_mut(x, y, c) = a * l.rgb_encoded.at(x, y, c) + (1.0 - a) * checker;
-                }
-            }
-        }
-        io::write_output(
-            &sibling(output, &format!("layer{k}.png")),
-            &over,
-            BitDepth::Eight,
-            |v| v,
-        )?;
-        let disp = Image::from_vec(
-            w,
-            h,
-            1,
-            l.disparity.data.iter().map(|&d| (d - lo) / span).collect(),
-        )?;
-        io::write_grey(&sibling(output, &format!("layer{k}.disparity.png")), &disp)?;
     }
     Ok(())
 }

@@ -6,12 +6,15 @@ mod bench_cmd;
 mod dfd;
 mod eval_cmd;
 mod layers_cmd;
+mod outputs;
 mod progress;
 mod render;
+mod signals;
 mod trace_cmd;
+mod values;
 mod vjp;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// Occlusion-aware, differentiable bokeh rendering (Dr.Bokeh).
 ///
@@ -29,6 +32,13 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+
+    /// Input budget in megapixel-layers (width x height x layers / 10^6; f64 counts twice,
+    /// a gradient tape four times): every input's size is checked from its header against
+    /// it before anything is read. Default 128 (env DRBOKEH_MAX_MEGAPIXELS); raise it if you
+    /// have the memory (at most 96 bytes per pixel-layer; see docs/limits.md).
+    #[arg(long, global = true, value_name = "MP", value_parser = values::positive_f64)]
+    max_megapixels: Option<f64>,
 }
 
 #[derive(Subcommand)]
@@ -56,7 +66,21 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    // Negative numbers are values, not options: `--focus -1` reaches the range check.
+    let command = Cli::command().mut_subcommands(|c| {
+        c.allow_negative_numbers(true)
+            .mut_subcommands(|c| c.allow_negative_numbers(true))
+    });
+    let cli = match Cli::from_arg_matches(&command.get_matches()) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    signals::install();
+    if let Some(mp) = cli.max_megapixels {
+        if let Err(e) = drbokeh::budget::set_max_megapixels(mp) {
+            fail(&anyhow::Error::from(e));
+        }
+    }
     let result = match cli.command {
         Command::Render(a) => render::run(&a),
         Command::Vjp(a) => vjp::run(&a),
@@ -70,7 +94,13 @@ fn main() {
         Command::Gallery(a) => eval_cmd::run_gallery(&a),
     };
     if let Err(e) = result {
-        eprintln!("drbokeh: error: {e:#}");
-        std::process::exit(1);
+        fail(&e);
     }
+}
+
+/// Prints the error and exits: 2 for a bad option value (a usage error, as clap reports
+/// its own), 1 for everything else (bad files, failed work).
+fn fail(e: &anyhow::Error) -> ! {
+    eprintln!("drbokeh: error: {}", args::describe(e));
+    std::process::exit(if values::is_usage_error(e) { 2 } else { 1 });
 }

@@ -1,6 +1,6 @@
 //! `drbokeh render`.
 
-use crate::args::{load_scene_for_render, settings_for, CameraArgs, ExecArgs, SceneArgs};
+use crate::args::{resolve, CameraArgs, ExecArgs, SceneArgs};
 use crate::progress::Bar;
 use anyhow::Result;
 use clap::Args;
@@ -35,19 +35,27 @@ pub struct RenderArgs {
     pub output: PathBuf,
 
     /// Bits per channel for PNG and TIFF output.
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u8).range(8..=16))]
+    #[arg(long, default_value_t = 8, value_parser = crate::values::bit_depth)]
     pub bit_depth: u8,
 }
 
 pub fn run(a: &RenderArgs) -> Result<()> {
     // Fail on a bad output name before any work.
-    OutputFormat::from_path(&a.output)?;
-    if a.bit_depth != 8 && a.bit_depth != 16 {
+    let format = OutputFormat::from_path(&a.output)?;
+    if a.bit_depth == 16 && !matches!(format, OutputFormat::Png | OutputFormat::Tiff) {
         anyhow::bail!(
-            "invalid parameter --bit-depth: must be 8 or 16, got {}",
-            a.bit_depth
+            "invalid parameter --bit-depth: 16 bits need a .png or .tif output; {} is {}",
+            a.output.display(),
+            match format {
+                OutputFormat::Jpeg => "JPEG (8 bits only)",
+                _ => "floating point (no bit depth)",
+            }
         );
     }
+    crate::outputs::plan_for_scene(&a.scene, &a.camera)
+        .file(&a.output, "--output", crate::outputs::RENDER_EXTENSIONS)
+        .check()?;
+    drbokeh::budget::set_work_kind(drbokeh::budget::WorkKind::new(a.exec.f64, false));
     a.exec.init_threads()?;
     if a.exec.f64 {
         run_typed::<f64>(a)
@@ -58,10 +66,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
 
 fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let engine: Engine = a.exec.engine()?;
-    let (stack, notes) = load_scene_for_render::<T>(&a.scene, &a.camera, engine)?;
-    let (settings, note) = settings_for(&a.camera, &a.scene, &stack, engine)?;
+    let drbokeh::scene::Scene {
+        stack,
+        settings,
+        notes,
+    } = resolve::<T>(&a.scene, &a.camera, engine)?;
     if !a.exec.quiet {
-        for n in notes.iter().chain(&note) {
+        for n in &notes {
             eprintln!("drbokeh: note: {n}");
         }
     }

@@ -124,19 +124,10 @@ fn trace_into(
     let outputs = trace::trace_scene(&scene, &spec.render, bar)?;
     let mut record = spec.clone();
     trace::absolutize_paths(&mut record, base_dir);
-    if force && out.exists() {
-        let name = out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "out".into());
-        let staging = out.with_file_name(format!(".{name}.new-{}", std::process::id()));
-        trace::write_scene_dir(&staging, &record, &scene, &outputs)?;
-        std::fs::remove_dir_all(out).with_context(|| format!("cannot remove {}", out.display()))?;
-        std::fs::rename(&staging, out)
-            .with_context(|| format!("cannot move output to {}", out.display()))?;
-    } else {
-        trace::write_scene_dir(out, &record, &scene, &outputs)?;
-    }
+    // Written into a temporary directory that replaces `out` (with force) once complete.
+    let mut staging = drbokeh::io::Staging::new();
+    trace::stage_scene_dir(&mut staging, out, force, &record, &scene, &outputs)?;
+    staging.commit()?;
     Ok(scene)
 }
 
@@ -151,7 +142,7 @@ pub fn run_trace(a: &TraceArgs) -> Result<()> {
         spec.render.seed = seed;
     }
     spec.validate().map_err(|e| e.in_file(&a.scene))?;
-    if a.out.exists() && !a.force {
+    if a.out.is_dir() && !a.force {
         bail!(
             "{}: output directory already exists (use --force to replace it)",
             a.out.display()
@@ -163,6 +154,26 @@ pub fn run_trace(a: &TraceArgs) -> Result<()> {
     } else {
         base_dir
     };
+    // Before any work: the output directory (never one holding an input), and the scene's
+    // size against the input budget (texture sizes from their headers).
+    let mut plan = drbokeh::io::OutputPlan::new();
+    plan.input(&a.scene, "SCENE.json");
+    for b in &spec.billboards {
+        if let trace::scene::TextureSpec::Image { path, alpha, .. } = &b.texture {
+            plan.input(base_dir.join(path), "a texture");
+            if let Some(al) = alpha {
+                plan.input(base_dir.join(al), "a texture matte");
+            }
+        }
+    }
+    let mode = if a.force {
+        drbokeh::io::DirMode::Replace
+    } else {
+        drbokeh::io::DirMode::New
+    };
+    plan.dir(&a.out, "--out", mode).check()?;
+    spec.check_budget(&base_dir)
+        .map_err(|e| e.in_file(&a.scene))?;
     let start = Instant::now();
     let bar = Bar::new("tracing", a.quiet);
     let scene = trace_into(&spec, &base_dir, &a.out, a.force, &bar);
@@ -237,6 +248,14 @@ fn run_make(a: &MakeArgs) -> Result<()> {
     for s in &specs {
         s.validate()?;
     }
+    if let Some(s) = specs.first() {
+        // Every scene has the same size and billboard count.
+        s.check_budget(Path::new("."))?;
+    }
+    // Sweeps the temporaries of interrupted runs (scene directories being written).
+    drbokeh::io::OutputPlan::new()
+        .dir(&a.out, "--out", drbokeh::io::DirMode::Merge)
+        .check()?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let entries = specs

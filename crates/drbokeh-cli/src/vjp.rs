@@ -1,6 +1,6 @@
 //! `drbokeh vjp`: gradients of `sum(G * render)` with respect to every input.
 
-use crate::args::{load_scene_for_render, settings_for, CameraArgs, ExecArgs, SceneArgs};
+use crate::args::{resolve, CameraArgs, ExecArgs, SceneArgs};
 use crate::progress::Bar;
 use anyhow::{bail, Result};
 use clap::Args;
@@ -47,16 +47,11 @@ pub struct VjpArgs {
 }
 
 pub fn run(a: &VjpArgs) -> Result<()> {
-    if !a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("npz"))
-    {
-        bail!(
-            "{}: the gradient output must be an .npz file",
-            a.output.display()
-        );
-    }
+    crate::outputs::plan_for_scene(&a.scene, &a.camera)
+        .input(&a.grad_output, "--grad-output")
+        .file(&a.output, "--output", &["npz"])
+        .check()?;
+    drbokeh::budget::set_work_kind(drbokeh::budget::WorkKind::new(a.exec.f64, true));
     a.exec.engine()?;
     a.exec.init_threads()?;
     if a.exec.f64 {
@@ -70,13 +65,16 @@ fn run_typed<T: Real>(a: &VjpArgs) -> Result<()> {
     let engine = a.exec.engine()?;
     // The same stack as `render` with these options (an image is decomposed for this
     // focus and blur), so the forward pass here is the render the gradient belongs to.
-    let (stack, notes) = load_scene_for_render::<T>(&a.scene, &a.camera, engine)?;
+    let drbokeh::scene::Scene {
+        stack,
+        settings,
+        notes,
+    } = resolve::<T>(&a.scene, &a.camera, engine)?;
     if !a.exec.quiet {
         for n in &notes {
             eprintln!("drbokeh: note: {n}");
         }
     }
-    let (settings, _) = settings_for(&a.camera, &a.scene, &stack, engine)?;
     let g = drbokeh::io::read_npy_image::<T>(&a.grad_output, 3, "output gradient")?;
     if g.width != stack.width || g.height != stack.height {
         bail!(

@@ -153,7 +153,11 @@ fn bad_inputs_fail_with_clear_messages() {
         "--methods",
         "gather,magic",
     ]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "a bad option value is a usage error"
+    );
     assert!(
         stderr(&o).contains("unknown method 'magic'"),
         "{}",

@@ -11,7 +11,7 @@
 //!   `S(1 - dist)` so that a ring-shaped kernel still lights in-focus pixels.
 
 use crate::image::Image;
-use crate::{Error, Real, Result};
+use crate::{Error, Result};
 
 /// The shape of the lens aperture (and so of the bokeh).
 #[derive(Clone, Debug, PartialEq, Default)]
@@ -61,6 +61,11 @@ impl KernelImage {
             height: grey.height,
             values: grey.data.iter().map(|v| v / max).collect(),
         })
+    }
+
+    /// Width and height in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
     }
 
     /// Bilinear sample at normalised coordinates (u, v) in [-1, 1] (longer side), 0 outside.
@@ -114,11 +119,11 @@ impl Aperture {
                 let parts: Vec<&str> = s.split(':').collect();
                 if parts[0] == "polygon" && (2..=3).contains(&parts.len()) {
                     let blades: u32 = parts[1].parse().map_err(|_| {
-                        Error::param("--aperture", format!("bad blade count in '{s}'"))
+                        Error::param("aperture", format!("bad blade count in '{s}'"))
                     })?;
                     let rotation_deg: f64 = match parts.get(2) {
                         Some(r) => r.parse().map_err(|_| {
-                            Error::param("--aperture", format!("bad rotation in '{s}'"))
+                            Error::param("aperture", format!("bad rotation in '{s}'"))
                         })?,
                         None => 0.0,
                     };
@@ -130,7 +135,7 @@ impl Aperture {
                     Ok(a)
                 } else {
                     Err(Error::param(
-                        "--aperture",
+                        "aperture",
                         format!(
                             "unknown aperture '{s}': use circle, polygon:N[:DEG], hexagon, ... or kernel:IMAGE"
                         ),
@@ -149,12 +154,12 @@ impl Aperture {
         {
             if !(3..=64).contains(blades) {
                 return Err(Error::param(
-                    "--aperture",
+                    "aperture",
                     format!("polygon needs 3 to 64 blades, got {blades}"),
                 ));
             }
             if !rotation_deg.is_finite() {
-                return Err(Error::param("--aperture", "rotation must be finite"));
+                return Err(Error::param("aperture", "rotation must be finite"));
             }
         }
         Ok(())
@@ -164,6 +169,7 @@ impl Aperture {
     /// shape's boundary. Euclidean distance for the circle; for the polygon,
     /// `|v| cos(delta) / cos(pi/n)` with `delta` the angle to the nearest edge normal.
     /// Not used by kernel apertures (which are not scaled copies of a convex shape).
+    /// Equation M5 of docs/model.md.
     pub fn gauge(&self, dx: f64, dy: f64) -> f64 {
         let dist = (dx * dx + dy * dy).sqrt();
         match self {
@@ -179,39 +185,6 @@ impl Aperture {
                 dist * delta.cos() / half.cos()
             }
             _ => dist,
-        }
-    }
-}
-
-/// The aperture prepared for evaluation in float type `T`.
-#[derive(Clone, Debug)]
-pub(crate) enum ApertureEval<T> {
-    /// Circle and polygon: `S(r - gauge)`, the gauge precomputed per tap.
-    Gauge,
-    /// A kernel image.
-    Kernel(KernelImage, std::marker::PhantomData<T>),
-}
-
-impl<T: Real> ApertureEval<T> {
-    /// Distance beyond which a source of radius `r` contributes at most the soft step's
-    /// dropped tail ([`crate::model::SCATTER_TAIL_PX`]): the polygon lies inside the
-    /// circle (its gauge is at least the distance), and a kernel reaches the corner of its
-    /// square, `sqrt(2) r`, plus one texel of bilinear support.
-    pub(crate) fn reach_px(&self, radius_px: f64) -> f64 {
-        let tail = crate::model::SCATTER_TAIL_PX;
-        match self {
-            ApertureEval::Gauge => radius_px + tail,
-            ApertureEval::Kernel(k, _) => {
-                let texel = 2.0 / k.width.max(k.height) as f64;
-                (std::f64::consts::SQRT_2 * radius_px * (1.0 + texel) + 1.0).max(1.0 + tail)
-            }
-        }
-    }
-
-    pub(crate) fn new(a: &Aperture) -> Self {
-        match a {
-            Aperture::Kernel(k) => ApertureEval::Kernel(k.clone(), std::marker::PhantomData),
-            _ => ApertureEval::Gauge,
         }
     }
 }

@@ -2,10 +2,12 @@
 //! multi-threaded engine (and the single-threaded reference where affordable), measured in
 //! one run, with taps visited, throughput and the largest difference in linear light.
 
+use crate::camera::WindowCap;
 use crate::demo;
-use crate::engine::adjoint::render_with_tape_on;
+use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
 use crate::image::Image;
+use crate::model;
 use crate::presets::RenderSettings;
 use crate::stack::{Layer, LayerStack};
 use crate::{Result, Window};
@@ -95,96 +97,135 @@ fn settings(focus: f64, k: f64, window: Window) -> RenderSettings {
 
 /// The standard workloads; `quick` keeps only the small ones.
 pub fn workloads(quick: bool) -> Vec<Workload> {
+    workloads_where(quick, |_| true)
+}
+
+/// The standard workloads whose name passes `keep`; the others' stacks are never built
+/// (a filter that matches nothing allocates nothing).
+pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload> {
     let l71 = Window::from_size(71).unwrap();
     let mut w = Vec::new();
-    let mut add = |name: &str, stack: LayerStack<f32>, s: RenderSettings, compare: Vec<Engine>| {
-        w.push(Workload {
-            name: name.into(),
-            stack,
-            settings: s,
-            compare,
-        })
-    };
-    let demo_stack: LayerStack<f32> = demo::scene(640, 426);
-    let demo_window = Window::auto(30.0 * demo_stack.max_defocus(demo::DEMO_FOCUS) + 1.0);
+    let mut add =
+        |name: &str, make: &dyn Fn() -> (LayerStack<f32>, RenderSettings), compare: Vec<Engine>| {
+            if keep(name) {
+                let (stack, settings) = make();
+                w.push(Workload {
+                    name: name.into(),
+                    stack,
+                    settings,
+                    compare,
+                })
+            }
+        };
     add(
         "demo-3L-K30",
-        demo_stack,
-        settings(demo::DEMO_FOCUS, 30.0, demo_window),
+        &|| {
+            let demo_stack: LayerStack<f32> = demo::scene(640, 426);
+            let demo_window = model::automatic_window(
+                30.0,
+                demo_stack.max_defocus(demo::DEMO_FOCUS),
+                WindowCap::Clipped,
+            );
+            (demo_stack, settings(demo::DEMO_FOCUS, 30.0, demo_window))
+        },
         vec![Engine::Threaded, Engine::Reference],
     );
     for k in [10.0, 30.0, 60.0] {
         add(
             &format!("0.25MP-2L-K{k}"),
-            two_layer(512, 512),
-            settings(0.5, k, l71),
+            &|| (two_layer(512, 512), settings(0.5, k, l71)),
             vec![Engine::Threaded],
         );
     }
     add(
         "0.25MP-1L-uniform-K30",
-        uniform_blur(512, 512),
-        settings(0.5, 30.0, l71),
+        &|| (uniform_blur(512, 512), settings(0.5, 30.0, l71)),
         vec![Engine::Threaded],
     );
-    let mut three = two_layer(512, 512);
-    three
-        .layers
-        .insert(0, Layer::constant(512, 512, [0.2, 0.8, 0.3], 0.0, 0.95));
-    for y in 0..512 {
-        for x in 0..512 {
-            if (x / 40 + y / 40) % 5 == 0 {
-                *three.layers[0].alpha.at_mut(x, y, 0) = 0.8;
-            }
-        }
-    }
     add(
         "0.25MP-3L-K30",
-        three,
-        settings(0.5, 30.0, l71),
+        &|| {
+            let mut three = two_layer(512, 512);
+            three
+                .layers
+                .insert(0, Layer::constant(512, 512, [0.2, 0.8, 0.3], 0.0, 0.95));
+            for y in 0..512 {
+                for x in 0..512 {
+                    if (x / 40 + y / 40) % 5 == 0 {
+                        *three.layers[0].alpha.at_mut(x, y, 0) = 0.8;
+                    }
+                }
+            }
+            (three, settings(0.5, 30.0, l71))
+        },
         vec![Engine::Threaded],
     );
     // Large blur with no window limit: radius 101 px (and 201 px in the full run).
     add(
         "0.07MP-1L-radius100",
-        uniform_blur(256, 256),
-        settings(0.5, 200.0, Window::auto_unclipped(101.0)),
+        &|| {
+            (
+                uniform_blur(256, 256),
+                settings(
+                    0.5,
+                    200.0,
+                    model::automatic_window(200.0, 0.5, WindowCap::Unclipped),
+                ),
+            )
+        },
         vec![],
     );
     if !quick {
         add(
             "1MP-2L-K30-L71 (paper defaults)",
-            two_layer(1024, 1024),
-            settings(0.5, 30.0, l71),
+            &|| (two_layer(1024, 1024), settings(0.5, 30.0, l71)),
             vec![Engine::Threaded],
         );
         add(
             "1MP-1L-uniform-K30",
-            uniform_blur(1024, 1024),
-            settings(0.5, 30.0, l71),
+            &|| (uniform_blur(1024, 1024), settings(0.5, 30.0, l71)),
             vec![],
         );
         add(
             "4MP-2L-K30",
-            two_layer(2048, 2048),
-            settings(0.5, 30.0, l71),
+            &|| (two_layer(2048, 2048), settings(0.5, 30.0, l71)),
             vec![],
         );
         add(
             "24MP-2L-K30",
-            two_layer(6000, 4000),
-            settings(0.5, 30.0, l71),
+            &|| (two_layer(6000, 4000), settings(0.5, 30.0, l71)),
             vec![],
         );
         add(
             "0.07MP-1L-radius200",
-            uniform_blur(256, 256),
-            settings(0.5, 400.0, Window::auto_unclipped(201.0)),
+            &|| {
+                (
+                    uniform_blur(256, 256),
+                    settings(
+                        0.5,
+                        400.0,
+                        model::automatic_window(400.0, 0.5, WindowCap::Unclipped),
+                    ),
+                )
+            },
             vec![],
         );
     }
     w
 }
+
+/// The names of the standard workloads (nothing is built).
+pub fn workload_names(quick: bool) -> Vec<String> {
+    let names = std::cell::RefCell::new(Vec::new());
+    workloads_where(quick, |n| {
+        names.borrow_mut().push(n.to_string());
+        false
+    });
+    names.into_inner()
+}
+
+/// The name of the adjoint workload ([`adjoint_workload`]).
+pub const ADJOINT_WORKLOAD_NAME: &str = "adjoint-0.25MP-2L-K30-L71";
 
 fn disc_area(stack: &LayerStack<f32>, s: &RenderSettings) -> f64 {
     let (k, f) = (s.camera.blur_k, s.camera.focus_disparity);
@@ -277,7 +318,7 @@ pub struct AdjointRow {
 /// a fixed pseudo-random field in [-1, 1].
 pub fn adjoint_workload() -> Workload {
     Workload {
-        name: "adjoint-0.25MP-2L-K30-L71".into(),
+        name: ADJOINT_WORKLOAD_NAME.into(),
         stack: two_layer(512, 512),
         settings: settings(0.5, 30.0, Window::from_size(71).expect("valid window")),
         compare: vec![Engine::Threaded],

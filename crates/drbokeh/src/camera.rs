@@ -13,6 +13,16 @@ pub const MAX_AUTO_WINDOW_SIZE: usize = 71;
 /// the soft step `S` has fallen to about 1e-5 at `dist = r + 3`.
 pub const AUTO_WINDOW_MARGIN_PX: f64 = 3.0;
 
+/// How far an automatic window may grow ([`Window::automatic`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WindowCap {
+    /// At most [`MAX_AUTO_WINDOW_SIZE`]: larger blurs are clipped (engines whose cost grows
+    /// with `L^2`).
+    Clipped,
+    /// At most [`MAX_WINDOW_SIZE`] (engines whose cost follows the blur radii).
+    Unclipped,
+}
+
 /// The square neighbourhood `L x L` (`L = 2R + 1`, odd) over which each receiver gathers.
 /// The aperture mask additionally requires `dist < R`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -25,13 +35,13 @@ impl Window {
     pub fn from_size(size: usize) -> Result<Self> {
         if size % 2 == 0 {
             return Err(Error::param(
-                "--window",
+                "window",
                 format!("window size must be odd (L = 2R + 1), got {size}"),
             ));
         }
         if !(3..=MAX_WINDOW_SIZE).contains(&size) {
             return Err(Error::param(
-                "--window",
+                "window",
                 format!("window size must be between 3 and {MAX_WINDOW_SIZE}, got {size}"),
             ));
         }
@@ -40,23 +50,37 @@ impl Window {
         })
     }
 
-    /// The smallest window that holds a scatter radius of `max_radius_px` (plus
-    /// [`AUTO_WINDOW_MARGIN_PX`]), capped at [`MAX_AUTO_WINDOW_SIZE`].
-    pub fn auto(max_radius_px: f64) -> Self {
+    /// The automatic window: the smallest that holds a scatter radius of `max_radius_px`
+    /// plus [`AUTO_WINDOW_MARGIN_PX`], at least `R = 1`, capped as `cap` says. The one rule
+    /// every automatic window follows (front ends, evaluation, gallery, benchmarks;
+    /// equation M22 of docs/model.md, with [`crate::model::automatic_window`]).
+    pub fn automatic(max_radius_px: f64, cap: WindowCap) -> Self {
         let r = (max_radius_px + AUTO_WINDOW_MARGIN_PX).ceil().max(1.0) as usize;
-        let cap = MAX_AUTO_WINDOW_SIZE / 2;
+        let cap = match cap {
+            WindowCap::Clipped => MAX_AUTO_WINDOW_SIZE,
+            WindowCap::Unclipped => MAX_WINDOW_SIZE,
+        };
         Window {
-            radius_px: r.min(cap),
+            radius_px: r.min(cap / 2),
         }
     }
 
-    /// Like [`Window::auto`] but capped at [`MAX_WINDOW_SIZE`] instead: for engines whose
-    /// cost follows the actual blur radii (the fast engine), no clipping in practice.
+    /// [`Window::automatic`] capped at [`MAX_AUTO_WINDOW_SIZE`].
+    pub fn auto(max_radius_px: f64) -> Self {
+        Window::automatic(max_radius_px, WindowCap::Clipped)
+    }
+
+    /// [`Window::automatic`] capped at [`MAX_WINDOW_SIZE`]: for engines whose cost follows
+    /// the actual blur radii (the fast engine), no clipping in practice.
     pub fn auto_unclipped(max_radius_px: f64) -> Self {
-        let r = (max_radius_px + AUTO_WINDOW_MARGIN_PX).ceil().max(1.0) as usize;
-        Window {
-            radius_px: r.min(MAX_WINDOW_SIZE / 2),
-        }
+        Window::automatic(max_radius_px, WindowCap::Unclipped)
+    }
+
+    /// When this (automatic) window clips a blur of scatter radius `max_radius_px` (plus
+    /// the margin): the window size that would hold it.
+    pub fn clips(&self, max_radius_px: f64) -> Option<usize> {
+        let needed = max_radius_px + AUTO_WINDOW_MARGIN_PX;
+        (needed > self.radius_px as f64 + 0.5).then(|| 2 * needed.ceil() as usize + 1)
     }
 
     /// `R`, the half-size in pixels.
@@ -101,30 +125,30 @@ impl Camera {
         }
     }
 
-    /// Checks every field's range; messages use the CLI's option names.
+    /// Checks every field's range; messages name the parameters (`focus`, `blur`, ...).
     pub fn validate(&self) -> Result<()> {
         let f = self.focus_disparity;
         if !f.is_finite() || !(0.0..=1.0).contains(&f) {
             return Err(Error::param(
-                "--focus",
+                "focus",
                 format!("focus disparity must be in [0, 1], got {f}"),
             ));
         }
         if !self.blur_k.is_finite() || self.blur_k < 0.0 || self.blur_k > 10_000.0 {
             return Err(Error::param(
-                "--blur",
+                "blur",
                 format!("blur strength K must be in [0, 10000], got {}", self.blur_k),
             ));
         }
         if !self.gamma.is_finite() || self.gamma <= 0.0 || self.gamma > 10.0 {
             return Err(Error::param(
-                "--gamma",
+                "gamma",
                 format!("gamma must be in (0, 10], got {}", self.gamma),
             ));
         }
         if !self.offset.is_finite() || !(0.0..=1.0).contains(&self.offset) {
             return Err(Error::param(
-                "--offset",
+                "offset",
                 format!("offset must be in [0, 1], got {}", self.offset),
             ));
         }

@@ -11,6 +11,8 @@ use crate::Real;
 
 /// The focus disparity that puts the demo's subject in focus.
 pub const DEMO_FOCUS: f64 = 0.55;
+/// The number of layers of the demo stack.
+pub const LAYERS: u64 = 3;
 /// The demo's default size.
 pub const DEMO_SIZE: (usize, usize) = (640, 426);
 

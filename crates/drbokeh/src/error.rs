@@ -16,7 +16,8 @@ pub enum Error {
     /// A parameter (camera, aperture, window) is out of its valid range.
     #[error("invalid parameter {name}: {problem}")]
     InvalidParameter {
-        /// The parameter's name as the user knows it (e.g. `--focus`).
+        /// The parameter's name as the library spells it (e.g. `focus`, `max_layers`);
+        /// front ends map it to their own spelling (the CLI to `--focus`).
         name: String,
         /// What is wrong with it.
         problem: String,
@@ -28,6 +29,18 @@ pub enum Error {
         path: PathBuf,
         /// What went wrong.
         problem: String,
+    },
+    /// An operating-system I/O error on a file, kept as the error's `source`. The message
+    /// includes the source's text, so printing this error alone says everything.
+    #[error("{}: {action}: {source}", path.display())]
+    Io {
+        /// The file or directory concerned.
+        path: PathBuf,
+        /// What was being done (`cannot read`, `cannot list`, ...).
+        action: String,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
     },
 }
 
@@ -56,6 +69,15 @@ impl Error {
         Error::File {
             path: path.into(),
             problem: problem.into(),
+        }
+    }
+
+    /// An [`Error::Io`]: `action` on `path` failed with `source`.
+    pub fn io(path: impl Into<PathBuf>, action: impl Into<String>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            action: action.into(),
+            source,
         }
     }
 

@@ -17,6 +17,7 @@
 pub mod aperture;
 pub mod baselines;
 pub mod bench;
+pub mod budget;
 pub mod camera;
 pub mod demo;
 pub mod dfd;
@@ -29,16 +30,21 @@ pub mod layering;
 pub mod loss;
 pub mod model;
 pub mod presets;
+mod progress;
 mod real;
+pub mod scene;
 pub mod stack;
 pub mod trace;
 
 pub use aperture::Aperture;
 pub use camera::{Camera, Window};
-pub use engine::adjoint::{render_with_tape, render_with_tape_on, Gradients, LayerGradients, Tape};
-pub use engine::{render, render_with_stats, Engine, NoProgress, Progress, RenderStats};
+pub use engine::{
+    render, render_with_stats, render_with_tape, render_with_tape_on, Engine, Gradients,
+    LayerGradients, RenderStats, Tape,
+};
 pub use error::{Error, Result};
 pub use image::Image;
 pub use presets::{Preset, RenderSettings};
+pub use progress::{NoProgress, Progress};
 pub use real::Real;
 pub use stack::{Layer, LayerStack};

@@ -161,7 +161,7 @@ impl<T: Real> LayerStack<T> {
     pub fn disparity_at(&self, x: usize, y: usize) -> Result<f64> {
         if x >= self.width || y >= self.height {
             return Err(Error::param(
-                "--focus-at",
+                "focus_at",
                 format!(
                     "pixel ({x}, {y}) is outside the {}x{} image",
                     self.width, self.height

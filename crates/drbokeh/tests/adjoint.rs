@@ -525,3 +525,109 @@ fn physical_adjoint_is_deterministic_and_matches_threaded() {
             .data
     );
 }
+
+// ---- Issue 14, case 10: the pixels reflection padding mirrors, to a relative 1e-6. ----
+
+/// A stack whose disparities are uniform in [0, 1] per pixel (so some receivers are in
+/// focus and the occlusion term is active, others blurred), alpha in [0.1, 1) with exact
+/// zeros and ones on alternate seeds; the last layer opaque.
+fn mirrored_stack(seed: u64, w: usize, h: usize, n: usize) -> LayerStack<f64> {
+    let mut rng = Rng(seed);
+    let zeros = seed % 2 == 0;
+    let layers = (0..n)
+        .map(|l| {
+            let mut layer = Layer::<f64>::constant(w, h, [0.0; 3], 1.0, 0.0);
+            for i in 0..w * h {
+                for c in 0..3 {
+                    layer.rgb_encoded.data[3 * i + c] = rng.range(0.05, 0.95);
+                }
+                let a = rng.range(0.0, 1.0);
+                layer.alpha.data[i] = match (l == n - 1, zeros) {
+                    (true, _) => 1.0,
+                    (false, true) if a < 0.2 => 0.0,
+                    (false, true) if a > 0.8 => 1.0,
+                    _ => 0.1 + 0.9 * a,
+                };
+                layer.disparity.data[i] = rng.range(0.0, 1.0);
+            }
+            layer
+        })
+        .collect();
+    LayerStack::new(layers).unwrap()
+}
+
+/// Every colour, alpha and disparity gradient against a fourth-order central difference
+/// (step 1e-4: truncation error about (1e-4 / 0.05)^4 relative at the sharpest in-focus
+/// curvature, rounding about 1e-11 absolute), to a relative 1e-6. The images are small
+/// for their window (R = 3 at 10 x 12; R = 4 at 7 x 6, where the padding folds more than
+/// once), so most pixels are copied by the reflection padding: a missing or doubled term
+/// at mirrored pixels shows as a relative error of 1e-5 or more.
+#[test]
+fn fd_mirrored_pixels_to_relative_1e6() {
+    const H: f64 = 1e-4;
+    let cases = [
+        (10, 12, 7, 1u64),
+        (10, 12, 7, 2),
+        (12, 10, 7, 3),
+        (7, 6, 9, 4),
+    ];
+    let mut checked = 0;
+    let mut failures = Vec::new();
+    for (w, h, window, seed) in cases {
+        let stack = mirrored_stack(seed, w, h, 2);
+        for preset in [ModelOptions::PAPER, ModelOptions::PHYSICAL] {
+            let s = settings(0.45, 9.0, window, Aperture::Circle).with_model(preset);
+            let weights = random_weights(seed + 40, w, h);
+            let (_, tape) = render_with_tape(&stack, &s, &NoProgress).unwrap();
+            let grads = tape.backward(&weights, &NoProgress).unwrap();
+            let fd = |bump: &dyn Fn(&mut LayerStack<f64>, f64)| {
+                let at = |t: f64| {
+                    let mut p = stack.clone();
+                    bump(&mut p, t);
+                    loss(&p, &s, &weights)
+                };
+                (8.0 * (at(H) - at(-H)) - (at(2.0 * H) - at(-2.0 * H))) / (12.0 * H)
+            };
+            for l in 0..2 {
+                for i in 0..w * h {
+                    let a = stack.layers[l].alpha.data[i];
+                    let d = stack.layers[l].disparity.data[i] - 0.45;
+                    let r = 9.0 * d.abs() + s.model().footprint.px();
+                    let box_jump = s.model().coverage == Coverage::PaperBox
+                        && ((r / 2.0) - (r / 2.0).round()).abs() < 5e-3;
+                    let mut entries: Vec<(String, f64, f64)> = Vec::new();
+                    for c in 0..3 {
+                        let g = fd(&|p, t| p.layers[l].rgb_encoded.data[3 * i + c] += t);
+                        entries.push((format!("rgb[{c}]"), grads.layers[l].rgb.data[3 * i + c], g));
+                    }
+                    if a > 2.0 * H && a < 1.0 - 2.0 * H {
+                        let g = fd(&|p, t| p.layers[l].alpha.data[i] += t);
+                        entries.push(("alpha".into(), grads.layers[l].alpha.data[i], g));
+                    }
+                    if d.abs() > 1e-3 && !box_jump {
+                        let g = fd(&|p, t| p.layers[l].disparity.data[i] += t);
+                        entries.push(("disparity".into(), grads.layers[l].disparity.data[i], g));
+                    }
+                    for (name, analytic, numeric) in entries {
+                        checked += 1;
+                        if (analytic - numeric).abs() > 1e-6 * numeric.abs() + 1e-9 {
+                            failures.push(format!(
+                                "{w}x{h} L{window} seed {seed} {:?} layer {l} x={} y={} {name}: analytic {analytic:e} vs fd {numeric:e}",
+                                preset.coverage,
+                                i % w,
+                                i / w
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 3000, "{checked}");
+    assert!(
+        failures.is_empty(),
+        "{} of {checked} gradients off:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}

@@ -33,7 +33,7 @@ use drbokeh::{
 /// (`sum_y c(y,x) (Ilin(y) - B(x)) = 0`), so the largest gradient can be smaller than
 /// (upstream factor x kept mass); we allow a factor 15 for that (measured: below 3), hence
 /// 1e-5. Receivers whose weight sum is of the order of the tail are summed over the whole
-/// window (`REFINE_WEIGHT_BELOW` in `engine/fast_adjoint.rs`); `O = 1` where
+/// window (`REFINE_WEIGHT_BELOW` in `engine/fast/adjoint/refine.rs`); `O = 1` where
 /// `e(x) < 1e-9` changes O's derivatives by at most `6 K^2 |d| e(x) < 1e-7` here.
 /// f64 rounding is below 1e-12. Measured on these scenes: at most 1.9e-6.
 const TAIL_TOLERANCE: f64 = 1e-5;

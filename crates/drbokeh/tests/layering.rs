@@ -387,7 +387,7 @@ fn bad_inputs_give_errors_or_single_layers_never_panics() {
         },
     )
     .unwrap_err();
-    assert!(e.to_string().contains("--max-layers"), "{e}");
+    assert!(e.to_string().contains("max_layers"), "{e}");
     // Empty matte: one opaque layer, with a note.
     let empty = Image::<f64>::new(w, h, 1);
     let d = layers_from_matte(&rgb, &disp, &empty, &opts).unwrap();

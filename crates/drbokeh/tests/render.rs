@@ -225,7 +225,8 @@ fn highlight_boost_brightens_only_bright_defocused_pixels() {
 }
 
 /// The 5x5 two-layer case of tools/golden_paper.py, an independent plain-Python
-/// evaluation of the spec's formulas (K = 4, f = 0.5, L = 5, gamma 2.2, circle).
+/// evaluation of docs/model.md's formulas for preset `paper` (K = 4, f = 0.5, L = 5,
+/// gamma 2.2, circle).
 /// Values printed by `python3 tools/golden_paper.py`.
 #[rustfmt::skip]
 const GOLDEN: [[f64; 3]; 25] = [

@@ -1,15 +1,15 @@
-//! The reference engine: single-threaded loops that read like the spec. Borders are
+//! The reference engine: single-threaded loops that read like docs/model.md. Borders are
 //! reflected on the fly; every term comes from [`crate::model`].
 
-use super::Progress;
-use crate::aperture::ApertureEval;
 use crate::image::Image;
-use crate::model::{self, Accumulator, PreparedLayer};
-use crate::presets::{Coverage, RenderSettings};
+use crate::model::{self, Accumulator, ApertureEval, Coverage, PreparedLayer};
+use crate::presets::RenderSettings;
+use crate::progress::Progress;
 use crate::stack::LayerStack;
 use crate::Real;
 
-pub(super) fn render<T: Real>(
+/// Renders with plain loops over every pixel, layer and window tap.
+pub(crate) fn render<T: Real>(
     stack: &LayerStack<T>,
     settings: &RenderSettings,
     progress: &dyn Progress,
@@ -24,7 +24,7 @@ pub(super) fn render<T: Real>(
     let layers: Vec<PreparedLayer<T>> = stack
         .layers
         .iter()
-        .map(|l| model::prepare_layer(l, settings))
+        .map(|l| model::prepare_layer(l, &settings.camera, &settings.model()))
         .collect();
     let (w, h) = (stack.width, stack.height);
     let mut out = Image::new(w, h, 3);
@@ -45,22 +45,16 @@ pub(super) fn render<T: Real>(
                         let yi = at(dx, dy);
                         let dist = ((dx * dx + dy * dy) as f64).sqrt();
                         let gauge = settings.aperture.gauge(dx as f64, dy as f64);
-                        let r_y = layer.radius_px[yi];
-                        let s = model::scatter_term(
+                        let source = (layer.alpha[yi], layer.radius_px[yi], layer.rel_disp[yi]);
+                        let c = model::masked_tap_weight(
                             step,
                             &aperture,
-                            dx,
-                            dy,
+                            (dx, dy),
                             T::c(dist),
                             T::c(gauge),
-                            r_y,
+                            source,
+                            (e_x, d_x),
                         );
-                        let o = if dx == 0 && dy == 0 {
-                            T::one()
-                        } else {
-                            model::occlusion(e_x, layer.rel_disp[yi], d_x)
-                        };
-                        let c = model::tap_weight(step, layer.alpha[yi], s, r_y, o);
                         let rgb = &layer.rgb_linear[3 * yi..3 * yi + 3];
                         acc.add([rgb[0], rgb[1], rgb[2]], c);
                     }

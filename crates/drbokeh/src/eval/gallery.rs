@@ -14,11 +14,14 @@
 //! planes are spread evenly over the normalised disparity range `[0, 1]`:
 //! `f_i = i / (N - 1)` (far to near).
 
-use super::report::{self, Method, MethodInput};
-use crate::camera::{Camera, Window, AUTO_WINDOW_MARGIN_PX, MAX_WINDOW_SIZE};
+use super::images::{write_disparity_preview, write_preview};
+use super::methods::{render_photo, require_photo_input, Method, MethodInput};
+use crate::camera::{Camera, WindowCap};
 use crate::image::Image;
 use crate::io::{self, DisparityOptions};
-use crate::{model, Error, Progress, Result};
+use crate::model::{self, Tone, Transfer};
+use crate::scene::read_display_image;
+use crate::{Error, Progress, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -46,7 +49,7 @@ pub fn find_inputs(dir: &Path) -> Result<(Vec<GalleryInput>, Vec<PathBuf>)> {
         return Err(Error::file(dir, "image directory does not exist"));
     }
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| Error::file(dir, format!("cannot list: {e}")))?
+        .map_err(|e| Error::io(dir, "cannot list", e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file())
         .collect();
@@ -125,16 +128,8 @@ pub fn sweep_file(plane: usize, method: Method) -> String {
 }
 
 fn load_input(input: &GalleryInput, gamma: f64) -> Result<(Image<f32>, Image<f32>)> {
-    let mut img: Image<f32> = io::read_rgb(&input.image)?;
-    if input
-        .image
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
-    {
-        img.data
-            .iter_mut()
-            .for_each(|v| *v = model::encode(v.max(0.0) as f64, gamma, 0.0) as f32);
-    }
+    let img: Image<f32> =
+        read_display_image(&input.image, &Tone::new(Transfer::Gamma, gamma, 0.0))?;
     let disp: Image<f32> = io::read_disparity(&input.disparity, DisparityOptions::default())?;
     if (disp.width, disp.height) != (img.width, img.height) {
         return Err(Error::file(
@@ -152,38 +147,6 @@ fn load_input(input: &GalleryInput, gamma: f64) -> Result<(Image<f32>, Image<f32
     Ok((img, disp))
 }
 
-/// Renders one method on an image + disparity pair (display-encoded, clipped).
-fn render_one(
-    method: Method,
-    img: &Image<f32>,
-    disp: &Image<f32>,
-    cam: &Camera,
-) -> Result<Image<f32>> {
-    use crate::baselines::{self, Baseline};
-    let stack = || crate::LayerStack::single(img.clone(), disp.clone());
-    let mut out = match method {
-        Method::Gather => baselines::naive_gather(img, disp, cam)?,
-        Method::Scatter => baselines::naive_scatter(img, disp, cam)?,
-        Method::GaussPsf => baselines::gauss_psf(img, disp, cam)?,
-        Method::Layered => Baseline::LayeredDisc.render(&stack()?, cam)?,
-        Method::PaperAif => report::render_paper(&stack()?, cam)?,
-        Method::PhysicalAif => {
-            report::render_preset(crate::Preset::Physical, &stack()?, cam)?
-        }
-        Method::LayeredGt | Method::PaperGt | Method::PhysicalGt => {
-            return Err(Error::param(
-                "--methods",
-                format!(
-                    "method '{}' needs a ground-truth layer stack; the gallery has image + disparity only",
-                    method.name()
-                ),
-            ))
-        }
-    };
-    out.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
-    Ok(out)
-}
-
 /// Renders the gallery for `inputs` into `out` (created if missing) and writes
 /// `out/index.html`. `progress` counts renders (inputs x planes x methods).
 pub fn make_gallery(
@@ -194,40 +157,31 @@ pub fn make_gallery(
 ) -> Result<()> {
     if options.focal_planes == 0 || options.focal_planes > 100 {
         return Err(Error::param(
-            "--focal-planes",
+            "focal_planes",
             format!("must be between 1 and 100, got {}", options.focal_planes),
         ));
     }
     if options.methods.is_empty() {
-        return Err(Error::param("--methods", "no method given"));
+        return Err(Error::param("methods", "no method given"));
     }
-    for m in &options.methods {
-        if m.input() != MethodInput::AifDisparity {
-            return Err(Error::param(
-                "--methods",
-                format!(
-                    "method '{}' needs a ground-truth layer stack; the gallery has image + disparity only",
-                    m.name()
-                ),
-            ));
-        }
+    for &m in &options.methods {
+        require_photo_input(m)?;
     }
     let mut cam = Camera::paper_default(0.5);
     cam.blur_k = options.blur_k;
     cam.gamma = options.gamma;
     cam.validate()?;
     let planes = focal_planes(options.focal_planes);
-    std::fs::create_dir_all(out).map_err(|e| Error::file(out, format!("cannot create: {e}")))?;
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, "cannot create", e))?;
     progress.start((inputs.len() * planes.len() * options.methods.len()) as u64);
     let mut sizes = Vec::new();
     for input in inputs {
         let (img, disp) = load_input(input, options.gamma)?;
         sizes.push((img.width, img.height));
         let dir = out.join(&input.name);
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| Error::file(&dir, format!("cannot create: {e}")))?;
-        report::write_preview(&dir.join("input.jpg"), &img)?;
-        report::write_disparity_preview(&dir.join("disparity.png"), &disp)?;
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, "cannot create", e))?;
+        write_preview(&dir.join("input.jpg"), &img)?;
+        write_disparity_preview(&dir.join("disparity.png"), &disp)?;
         for (pi, &f) in planes.iter().enumerate() {
             let mut c = cam.clone();
             c.focus_disparity = f;
@@ -236,12 +190,10 @@ pub fn make_gallery(
                 .iter()
                 .map(|d| (*d as f64 - f).abs())
                 .fold(0.0, f64::max);
-            let r = c.blur_k * max_d + 1.0 + AUTO_WINDOW_MARGIN_PX;
-            let radius = (r.ceil().max(1.0) as usize).min(MAX_WINDOW_SIZE / 2);
-            c.window = Window::from_size(2 * radius + 1)?;
+            c.window = model::automatic_window(c.blur_k, max_d, WindowCap::Unclipped);
             for &m in &options.methods {
-                let render = render_one(m, &img, &disp, &c)?;
-                report::write_preview(&dir.join(sweep_file(pi, m)), &render)?;
+                let render = render_photo(m, &img, &disp, &c)?;
+                write_preview(&dir.join(sweep_file(pi, m)), &render)?;
                 progress.advance(1);
             }
         }

@@ -1,29 +1,85 @@
 //! Raster images through the `image` crate: PNG (8/16-bit), JPEG, TIFF, EXR.
 //! Colour read from PNG/JPEG/TIFF is display-encoded; EXR holds linear light.
 
-use super::{extension, npz::read_any, open, write_atomic};
+use super::files::{extension, open};
+use super::npy::{self, Integers};
+use super::npz::Npz;
+use super::staging::Staging;
 use crate::image::{check_dimensions, Image};
-use crate::{Error, Real, Result};
-use image::{DynamicImage, ImageFormat};
+use crate::{budget, Error, Real, Result};
+use image::{DynamicImage, ImageDecoder, ImageFormat};
 use std::path::Path;
 
-/// Decodes any supported raster file, with errors naming the file.
+/// The decoder limits: at most [`crate::image::MAX_DIMENSION`] per side and
+/// [`budget::max_decoder_bytes`] of allocations (set explicitly: the `image` crate's default
+/// of 512 MiB rejects valid 16-bit images of 90 MP and more).
+fn decoder_limits() -> image::Limits {
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(crate::image::MAX_DIMENSION as u32);
+    limits.max_image_height = Some(crate::image::MAX_DIMENSION as u32);
+    limits.max_alloc = Some(budget::max_decoder_bytes());
+    limits
+}
+
+/// Decodes any supported raster file, with errors naming the file; `what` names its role.
+/// The header is read first: dimensions are checked (per-image limits and the input budget)
+/// before the pixels are decoded.
 pub(crate) fn decode(path: &Path) -> Result<DynamicImage> {
-    let reader = image::ImageReader::new(std::io::BufReader::new(open(path)?))
+    decode_as(path, "image")
+}
+
+/// [`decode`] with the file's role (`"texture"`, `"image"`) in messages.
+pub(crate) fn decode_as(path: &Path, what: &str) -> Result<DynamicImage> {
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(open(path)?))
         .with_guessed_format()
         .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
     if reader.format().is_none() {
         return Err(Error::file(
             path,
-            "unrecognised image format (supported: PNG, JPEG, TIFF, EXR)",
+            format!("unrecognised {what} format (supported: PNG, JPEG, TIFF, EXR)"),
         ));
     }
-    let img = reader
-        .decode()
-        .map_err(|e| Error::file(path, format!("corrupt or unsupported image: {e}")))?;
-    check_dimensions("image", img.width() as usize, img.height() as usize)
-        .map_err(|e| e.in_file(path))?;
-    Ok(img)
+    reader.limits(decoder_limits());
+    let decoder = reader
+        .into_decoder()
+        .map_err(|e| decode_error(path, what, e))?;
+    let (w, h) = decoder.dimensions();
+    check_dimensions(what, w as usize, h as usize).map_err(|e| e.in_file(path))?;
+    budget::check_work(&path.display().to_string(), w as u64, h as u64, 1)?;
+    DynamicImage::from_decoder(decoder).map_err(|e| decode_error(path, what, e))
+}
+
+/// The dimensions of an image file from its header (nothing decoded); `what` names its role.
+pub fn image_dimensions(path: &Path, what: &str) -> Result<(u32, u32)> {
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(open(path)?))
+        .with_guessed_format()
+        .map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
+    if reader.format().is_none() {
+        return Err(Error::file(
+            path,
+            format!("unrecognised {what} format (supported: PNG, JPEG, TIFF, EXR)"),
+        ));
+    }
+    reader.limits(decoder_limits());
+    let (w, h) = reader
+        .into_dimensions()
+        .map_err(|e| decode_error(path, what, e))?;
+    check_dimensions(what, w as usize, h as usize).map_err(|e| e.in_file(path))?;
+    Ok((w, h))
+}
+
+fn decode_error(path: &Path, what: &str, e: image::ImageError) -> Error {
+    match e {
+        image::ImageError::Limits(l) => Error::file(
+            path,
+            format!(
+                "the {what} decoder needs more memory than allowed ({l}; the limit is {} MiB, \
+                 set by --max-megapixels)",
+                budget::max_decoder_bytes() >> 20
+            ),
+        ),
+        e => Error::file(path, format!("corrupt or unsupported {what}: {e}")),
+    }
 }
 
 /// Whether the file holds linear light (EXR) rather than display-encoded values.
@@ -95,95 +151,91 @@ pub fn read_grey<T: Real>(path: &Path, what: &str) -> Result<Image<T>> {
 }
 
 /// Reads a 2-D array (H, W) or (H, W, 1) from NPY, or key `data` from NPZ (the official
-/// tool's convention).
+/// tool's convention). Header first: shape and budget are checked before the data is read.
 fn read_grey_array<T: Real>(path: &Path, what: &str) -> Result<Image<T>> {
-    let fail = |p: String| Error::file(path, p);
-    let arr: ndarray::ArrayD<f64> = if extension(path) == "npz" {
-        let mut npz = ndarray_npy::NpzReader::new(open(path)?)
-            .map_err(|e| fail(format!("not a readable NPZ archive: {e}")))?;
-        let names = npz
-            .names()
-            .map_err(|e| fail(format!("corrupt NPZ archive: {e}")))?;
+    let grey = |s: &[u64]| matches!(s, [_, _] | [_, _, 1]);
+    let expected = "(H, W) or (H, W, 1)";
+    let (shape, data) = if extension(path) == "npz" {
+        let mut npz = Npz::open(path)?;
+        let names = npz.names();
         if !names.iter().any(|n| n == "data") {
-            return Err(fail(format!(
-                "missing key 'data' (found: {})",
-                names.join(", ")
-            )));
+            return Err(Error::file(
+                path,
+                format!("missing key 'data' (found: {})", names.join(", ")),
+            ));
         }
-        read_any(&mut npz, "data", true).map_err(fail)?
+        npz.array::<T>("data", Integers::Scale, grey, expected)?
     } else {
-        read_npy_any(path)?
+        read_npy_checked(path, Integers::Scale, grey, what, expected)?
     };
-    let s = arr.shape().to_vec();
-    let (h, w) = match s.as_slice() {
-        [h, w] | [h, w, 1] => (*h, *w),
-        _ => {
-            return Err(fail(format!(
-                "{what} array has shape {s:?}, expected (H, W) or (H, W, 1)"
-            )))
-        }
-    };
+    let (h, w) = (shape[0] as usize, shape[1] as usize);
     check_dimensions(what, w, h).map_err(|e| e.in_file(path))?;
-    let out = Image::from_vec(w, h, 1, arr.iter().map(|&v| T::c(v)).collect())?;
+    let out = Image::from_vec(w, h, 1, data)?;
     out.check_finite(what).map_err(|e| e.in_file(path))?;
     Ok(out)
 }
 
-fn read_npy_any(path: &Path) -> Result<ndarray::ArrayD<f64>> {
-    use ndarray::{ArrayD, OwnedRepr};
-    use ndarray_npy::ReadNpyExt;
-    let read = |f: &dyn Fn(std::fs::File) -> std::result::Result<ArrayD<f64>, String>| {
-        f(open(path)?).map_err(|e| Error::file(path, e))
-    };
-    let first = read(&|f| {
-        ndarray::ArrayBase::<OwnedRepr<f32>, _>::read_npy(f)
-            .map(|a| a.mapv(|v| v as f64))
-            .map_err(|e| e.to_string())
-    });
-    first
-        .or_else(|_| read(&|f| ArrayD::<f64>::read_npy(f).map_err(|e| e.to_string())))
-        .or_else(|_| {
-            read(&|f| {
-                ndarray::ArrayBase::<OwnedRepr<u16>, _>::read_npy(f)
-                    .map(|a| a.mapv(|v| v as f64 / 65535.0))
-                    .map_err(|e| e.to_string())
-            })
-        })
-        .map_err(|_| {
-            Error::file(
-                path,
-                "not a readable NPY array of float32, float64 or uint16 (corrupt, truncated or unsupported dtype)",
-            )
-        })
+/// Reads an NPY file after checking its header: dtype policy, accepted shape
+/// (`expected` describes it), size against the file and the input budget.
+fn read_npy_checked<T: Real>(
+    path: &Path,
+    integers: Integers,
+    shape_ok: impl Fn(&[u64]) -> bool,
+    what: &str,
+    expected: &str,
+) -> Result<(Vec<u64>, Vec<T>)> {
+    let (mut r, h) = npy::open_npy(path)?;
+    let file = path.display().to_string();
+    npy::check_dtype(&h, integers, &file)?;
+    if !shape_ok(&h.shape) {
+        return Err(Error::file(
+            path,
+            format!("{what} has shape {:?}, expected {expected}", h.shape),
+        ));
+    }
+    h.check_budget(&file)?;
+    let data = npy::read_data::<T, _>(&mut r, &h).map_err(|e| Error::file(path, e))?;
+    Ok((h.shape, data))
 }
 
-/// Reads an `(H, W, C)` NPY array (float32, float64 or uint16) as an image with `channels`
-/// channels; `what` names its role in messages.
+/// Reads an `(H, W, C)` NPY array (float32, float64, uint8 or uint16) as an image with
+/// `channels` channels; `what` names its role in messages. The header is checked (shape,
+/// size, budget) before the data is read.
 pub fn read_npy_image<T: Real>(path: &Path, channels: usize, what: &str) -> Result<Image<T>> {
-    let arr = read_npy_any(path)?;
-    let s = arr.shape().to_vec();
-    let (h, w) = match s.as_slice() {
-        [h, w, c] if *c == channels => (*h, *w),
-        [h, w] if channels == 1 => (*h, *w),
-        _ => {
-            return Err(Error::file(
-                path,
-                format!("{what} has shape {s:?}, expected (H, W, {channels})"),
-            ))
-        }
-    };
+    let c = channels as u64;
+    let (shape, data) = read_npy_checked::<T>(
+        path,
+        Integers::Scale,
+        |s| matches!(s, [_, _, ch] if *ch == c) || (channels == 1 && s.len() == 2),
+        what,
+        &format!("(H, W, {channels})"),
+    )?;
+    let (h, w) = (shape[0] as usize, shape[1] as usize);
     check_dimensions(what, w, h).map_err(|e| e.in_file(path))?;
-    let out = Image::from_vec(w, h, channels, arr.iter().map(|&v| T::c(v)).collect())?;
+    let out = Image::from_vec(w, h, channels, data)?;
     out.check_finite(what).map_err(|e| e.in_file(path))?;
     Ok(out)
 }
 
 /// Reads an alpha matte: a grey image, or the alpha channel of a grey+alpha / RGBA image.
 pub fn read_matte<T: Real>(path: &Path) -> Result<Image<T>> {
-    if extension(path) == "npy" || extension(path) == "npz" {
-        return read_grey_array(path, "alpha matte");
+    let out: Image<T> = if extension(path) == "npy" || extension(path) == "npz" {
+        read_grey_array(path, "alpha matte")?
+    } else {
+        read_matte_image(path)?
+    };
+    if let Some(v) = out.data.iter().find(|v| **v < T::zero() || **v > T::one()) {
+        return Err(Error::file(
+            path,
+            format!("alpha matte values must be in [0, 1], found {}", v.f64()),
+        ));
     }
-    let img = decode(path)?;
+    Ok(out)
+}
+
+/// The matte of an image file: grey, or its alpha channel.
+fn read_matte_image<T: Real>(path: &Path) -> Result<Image<T>> {
+    let img = decode_as(path, "alpha matte")?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let n = img.color().channel_count();
     let data: Vec<f32> = match n {
@@ -207,9 +259,6 @@ pub fn read_matte<T: Real>(path: &Path) -> Result<Image<T>> {
     let out = Image::from_vec(w, h, 1, data.into_iter().map(|v| T::c(v as f64)).collect())?;
     out.check_finite("alpha matte")
         .map_err(|e| e.in_file(path))?;
-    if out.data.iter().any(|v| *v < T::zero() || *v > T::one()) {
-        return Err(Error::file(path, "alpha matte values must be in [0, 1]"));
-    }
     Ok(out)
 }
 
@@ -264,140 +313,164 @@ pub fn write_output<T: Real>(
     bit_depth: BitDepth,
     to_linear: impl Fn(f64) -> f64,
 ) -> Result<()> {
-    let format = OutputFormat::from_path(path)?;
-    let (w, h) = (image.width as u32, image.height as u32);
-    let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
-    match format {
-        OutputFormat::Npy => {
-            use ndarray_npy::WriteNpyExt;
-            let shape = (image.height, image.width, image.channels);
-            write_atomic(path, |out| {
-                let err =
-                    |e: ndarray_npy::WriteNpyError| Error::file(path, format!("write failed: {e}"));
-                if std::any::TypeId::of::<T>() == std::any::TypeId::of::<f64>() {
-                    let data: Vec<f64> = image.data.iter().map(|v| v.f64()).collect();
-                    ndarray::Array3::from_shape_vec(shape, data)
-                        .unwrap()
-                        .write_npy(out)
-                        .map_err(err)
-                } else {
-                    let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
-                    ndarray::Array3::from_shape_vec(shape, data)
-                        .unwrap()
-                        .write_npy(out)
-                        .map_err(err)
-                }
-            })
-        }
-        OutputFormat::Exr => {
-            let data: Vec<f32> = image
-                .data
-                .iter()
-                .map(|v| to_linear(v.f64()) as f32)
-                .collect();
-            let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
-            write_atomic(path, |out| {
-                DynamicImage::ImageRgb32F(buf)
-                    .write_to(out, ImageFormat::OpenExr)
-                    .map_err(fail)
-            })
-        }
-        OutputFormat::Jpeg => {
-            let data = image
-                .data
-                .iter()
-                .map(|&v| (v.f64().clamp(0.0, 1.0) * 255.0).round() as u8)
-                .collect();
-            let buf = image::RgbImage::from_raw(w, h, data).unwrap();
-            write_atomic(path, |out| {
-                image::codecs::jpeg::JpegEncoder::new_with_quality(out, 92)
-                    .encode_image(&buf)
-                    .map_err(fail)
-            })
-        }
-        OutputFormat::Png | OutputFormat::Tiff => {
-            let fmt = if format == OutputFormat::Png {
-                ImageFormat::Png
-            } else {
-                ImageFormat::Tiff
-            };
-            let clip = |v: T| v.f64().clamp(0.0, 1.0);
-            let dynimg = match bit_depth {
-                BitDepth::Eight => DynamicImage::ImageRgb8(
-                    image::RgbImage::from_raw(
-                        w,
-                        h,
-                        image
-                            .data
-                            .iter()
-                            .map(|&v| (clip(v) * 255.0).round() as u8)
-                            .collect(),
-                    )
-                    .unwrap(),
-                ),
-                BitDepth::Sixteen => DynamicImage::ImageRgb16(
-                    image::ImageBuffer::from_raw(
-                        w,
-                        h,
-                        image
-                            .data
-                            .iter()
-                            .map(|&v| (clip(v) * 65535.0).round() as u16)
-                            .collect(),
-                    )
-                    .unwrap(),
-                ),
-            };
-            write_atomic(path, |out| dynimg.write_to(out, fmt).map_err(fail))
-        }
-    }
+    let mut s = Staging::new();
+    s.output(path, image, bit_depth, to_linear)?;
+    s.commit()
 }
 
 /// Writes a one-channel map (e.g. disparity in [0, 1]): `.png` as 16-bit grey (clipped to
 /// [0, 1]), `.npy` as float32 (H, W), `.exr` as linear float (grey in all channels).
 pub fn write_grey<T: Real>(path: &Path, image: &Image<T>) -> Result<()> {
-    let (w, h) = (image.width as u32, image.height as u32);
-    let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
-    match extension(path).as_str() {
-        "png" => {
-            let data = image
-                .data
-                .iter()
-                .map(|v| (v.f64().clamp(0.0, 1.0) * 65535.0).round() as u16)
-                .collect();
-            let buf =
-                image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, data).unwrap();
-            write_atomic(path, |out| {
-                DynamicImage::ImageLuma16(buf)
-                    .write_to(out, ImageFormat::Png)
-                    .map_err(fail)
-            })
+    let mut s = Staging::new();
+    s.grey(path, image)?;
+    s.commit()
+}
+
+impl Staging {
+    /// Stages a rendered image (see [`write_output`]); visible at [`Staging::commit`].
+    pub fn output<T: Real>(
+        &mut self,
+        path: &Path,
+        image: &Image<T>,
+        bit_depth: BitDepth,
+        to_linear: impl Fn(f64) -> f64,
+    ) -> Result<()> {
+        let format = OutputFormat::from_path(path)?;
+        let (w, h) = (image.width as u32, image.height as u32);
+        let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
+        match format {
+            OutputFormat::Npy => {
+                use ndarray_npy::WriteNpyExt;
+                let shape = (image.height, image.width, image.channels);
+                self.file(path, |out| {
+                    let err = |e: ndarray_npy::WriteNpyError| {
+                        Error::file(path, format!("write failed: {e}"))
+                    };
+                    if std::any::TypeId::of::<T>() == std::any::TypeId::of::<f64>() {
+                        let data: Vec<f64> = image.data.iter().map(|v| v.f64()).collect();
+                        ndarray::Array3::from_shape_vec(shape, data)
+                            .unwrap()
+                            .write_npy(out)
+                            .map_err(err)
+                    } else {
+                        let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
+                        ndarray::Array3::from_shape_vec(shape, data)
+                            .unwrap()
+                            .write_npy(out)
+                            .map_err(err)
+                    }
+                })
+            }
+            OutputFormat::Exr => {
+                let data: Vec<f32> = image
+                    .data
+                    .iter()
+                    .map(|v| to_linear(v.f64()) as f32)
+                    .collect();
+                let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
+                self.file(path, |out| {
+                    DynamicImage::ImageRgb32F(buf)
+                        .write_to(out, ImageFormat::OpenExr)
+                        .map_err(fail)
+                })
+            }
+            OutputFormat::Jpeg => {
+                let data = image
+                    .data
+                    .iter()
+                    .map(|&v| (v.f64().clamp(0.0, 1.0) * 255.0).round() as u8)
+                    .collect();
+                let buf = image::RgbImage::from_raw(w, h, data).unwrap();
+                self.file(path, |out| {
+                    image::codecs::jpeg::JpegEncoder::new_with_quality(out, 92)
+                        .encode_image(&buf)
+                        .map_err(fail)
+                })
+            }
+            OutputFormat::Png | OutputFormat::Tiff => {
+                let fmt = if format == OutputFormat::Png {
+                    ImageFormat::Png
+                } else {
+                    ImageFormat::Tiff
+                };
+                let clip = |v: T| v.f64().clamp(0.0, 1.0);
+                let dynimg = match bit_depth {
+                    BitDepth::Eight => DynamicImage::ImageRgb8(
+                        image::RgbImage::from_raw(
+                            w,
+                            h,
+                            image
+                                .data
+                                .iter()
+                                .map(|&v| (clip(v) * 255.0).round() as u8)
+                                .collect(),
+                        )
+                        .unwrap(),
+                    ),
+                    BitDepth::Sixteen => DynamicImage::ImageRgb16(
+                        image::ImageBuffer::from_raw(
+                            w,
+                            h,
+                            image
+                                .data
+                                .iter()
+                                .map(|&v| (clip(v) * 65535.0).round() as u16)
+                                .collect(),
+                        )
+                        .unwrap(),
+                    ),
+                };
+                self.file(path, |out| dynimg.write_to(out, fmt).map_err(fail))
+            }
         }
-        "npy" => {
-            use ndarray_npy::WriteNpyExt;
-            let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
-            let arr = ndarray::Array2::from_shape_vec((image.height, image.width), data).unwrap();
-            write_atomic(path, |out| {
-                arr.write_npy(out)
-                    .map_err(|e| Error::file(path, format!("write failed: {e}")))
-            })
+    }
+
+    /// Stages a one-channel map (see [`write_grey`]); visible at [`Staging::commit`].
+    pub fn grey<T: Real>(&mut self, path: &Path, image: &Image<T>) -> Result<()> {
+        let (w, h) = (image.width as u32, image.height as u32);
+        let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
+        match extension(path).as_str() {
+            "png" => {
+                let data = image
+                    .data
+                    .iter()
+                    .map(|v| (v.f64().clamp(0.0, 1.0) * 65535.0).round() as u16)
+                    .collect();
+                let buf =
+                    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, data).unwrap();
+                self.file(path, |out| {
+                    DynamicImage::ImageLuma16(buf)
+                        .write_to(out, ImageFormat::Png)
+                        .map_err(fail)
+                })
+            }
+            "npy" => {
+                use ndarray_npy::WriteNpyExt;
+                let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
+                let arr =
+                    ndarray::Array2::from_shape_vec((image.height, image.width), data).unwrap();
+                self.file(path, |out| {
+                    arr.write_npy(out)
+                        .map_err(|e| Error::file(path, format!("write failed: {e}")))
+                })
+            }
+            "exr" => {
+                let data: Vec<f32> = image
+                    .data
+                    .iter()
+                    .flat_map(|v| [v.f64() as f32; 3])
+                    .collect();
+                let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
+                self.file(path, |out| {
+                    DynamicImage::ImageRgb32F(buf)
+                        .write_to(out, ImageFormat::OpenExr)
+                        .map_err(fail)
+                })
+            }
+            e => Err(Error::file(
+                path,
+                format!("unsupported extension '.{e}' for a map (use .png, .npy or .exr)"),
+            )),
         }
-        "exr" => {
-            let data: Vec<f32> = image
-                .data
-                .iter()
-                .flat_map(|v| [v.f64() as f32; 3])
-                .collect();
-            let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
-            write_atomic(path, |out| {
-                DynamicImage::ImageRgb32F(buf)
-                    .write_to(out, ImageFormat::OpenExr)
-                    .map_err(fail)
-            })
-        }
-        e => Err(Error::file(
-            path,
-            format!("unsupported extension '.{e}' for a map (use .png, .npy or .exr)"),
-        )),
     }
 }

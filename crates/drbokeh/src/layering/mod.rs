@@ -44,9 +44,11 @@
 
 mod cuts;
 mod fill;
+mod preview;
 mod telea;
 
 pub use fill::{push_pull_fill, smooth_fill};
+pub use preview::{sibling, write_previews};
 pub use telea::{inpaint_telea, Inpainted, Region, TeleaOptions};
 
 use crate::image::{check_dimensions, Image};
@@ -130,11 +132,11 @@ impl Default for LayeringOptions {
 }
 
 impl LayeringOptions {
-    /// Checks every parameter, naming the CLI option in messages.
+    /// Checks every parameter; messages name the parameter (`max_layers`, `jump`, ...).
     pub fn validate(&self) -> Result<()> {
         if self.max_layers == 0 || self.max_layers > MAX_LAYERS_LIMIT {
             return Err(Error::param(
-                "--max-layers",
+                "max_layers",
                 format!(
                     "must be between 1 and {MAX_LAYERS_LIMIT}, got {}",
                     self.max_layers
@@ -143,7 +145,7 @@ impl LayeringOptions {
         }
         if !(self.jump_fraction > 0.0 && self.jump_fraction < 1.0) {
             return Err(Error::param(
-                "--jump",
+                "jump",
                 format!(
                     "must be a fraction of the disparity range in (0, 1), got {}",
                     self.jump_fraction
@@ -169,7 +171,7 @@ impl LayeringOptions {
         if let Some(b) = self.occlusion_band_px {
             if b.is_nan() || b < 0.0 {
                 return Err(Error::param(
-                    "--band",
+                    "band",
                     format!("must be a non-negative number of pixels, got {b}"),
                 ));
             }
@@ -177,13 +179,13 @@ impl LayeringOptions {
         if let Some((f, k)) = self.focus_hint {
             if !(0.0..=1.0).contains(&f) {
                 return Err(Error::param(
-                    "--focus",
+                    "focus",
                     format!("must be a disparity in [0, 1], got {f}"),
                 ));
             }
             if !(k.is_finite() && k >= 0.0) {
                 return Err(Error::param(
-                    "--blur",
+                    "blur",
                     format!("must be a finite number >= 0, got {k}"),
                 ));
             }
@@ -398,7 +400,7 @@ pub fn layers_from_disparity<T: Real>(
     }
     if cuts.layers < 2 {
         let why = if opts.max_layers == 1 {
-            "--max-layers is 1".to_string()
+            "at most one layer was asked for (max_layers = 1)".to_string()
         } else if dropped > 0 {
             "at this focus and blur, no depth edge has its nearer side more blurred than the farther one (layers would not change the render)".to_string()
         } else if hi - lo <= 0.0 {

@@ -1,6 +1,6 @@
 //! L1 loss: the mean absolute difference between a prediction and a target.
 
-use super::check_same_shape;
+use super::check::check_same_shape;
 use crate::{Image, Real, Result};
 
 /// Mean absolute difference `(1/n) sum_i |pred_i - target_i|`, where the mean runs over

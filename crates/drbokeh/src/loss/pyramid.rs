@@ -1,6 +1,6 @@
 //! 2x2 average pooling (one image-pyramid step) and its adjoint.
 
-use super::check_image;
+use super::check::check_image;
 use crate::{Error, Image, Real, Result};
 
 /// Halves an image by 2x2 average pooling, per channel: output pixel `(x, y)` is the mean

@@ -12,7 +12,7 @@
 //! `|dx I_c|`, so the edge weight `exp(-|dx I|)` is one number per difference. The guide is
 //! a constant: gradients are taken with respect to the disparity only.
 
-use super::check_image;
+use super::check::check_image;
 use super::pyramid::{avg_pool2, avg_pool2_adjoint};
 use crate::{Error, Image, Real, Result};
 

@@ -30,7 +30,7 @@
 //! *not* what scikit-image does when handed `sigma = k/6`: it always truncates its Gaussian
 //! at `3.5 sigma` (a 13-tap filter, radius 6, for `sigma = 11/6`), whatever `win_size` says.
 
-use super::check_same_shape;
+use super::check::check_same_shape;
 use crate::{Error, Image, Real, Result};
 
 /// The window sizes `k` of the HSSIM loss.

@@ -170,7 +170,7 @@ pub fn manifest_entry(spec: &SceneSpec, index: usize, dir_name: &str) -> Result<
     let zf = optics.focus_distance_mm();
     let k = optics.aperture_radius_mm * optics.sensor_distance_mm * (1.0 / near - 1.0 / far)
         / optics.pixel_pitch_mm;
-    let focus = (1.0 / zf - 1.0 / far) / (1.0 / near - 1.0 / far);
+    let focus = super::scene::snap_unit((1.0 / zf - 1.0 / far) / (1.0 / near - 1.0 / far));
     let max_coc = depths
         .iter()
         .map(|&z| optics.coc_radius_px(z))

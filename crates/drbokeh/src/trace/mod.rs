@@ -206,21 +206,23 @@ pub fn write_scene_dir(
     if dir.exists() {
         return Err(Error::file(dir, "output directory already exists"));
     }
-    let parent = match dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    if !parent.is_dir() {
-        return Err(Error::file(
-            parent,
-            "output's parent directory does not exist",
-        ));
-    }
-    let tmp = tempfile::Builder::new()
-        .prefix(".drbokeh-scene-")
-        .tempdir_in(parent)
-        .map_err(|e| Error::file(parent, format!("cannot create temporary directory: {e}")))?;
-    let t = tmp.path();
+    let mut staging = io::Staging::new();
+    stage_scene_dir(&mut staging, dir, false, spec, scene, out)?;
+    staging.commit()
+}
+
+/// Stages one scene's directory `dir` (see [`write_scene_dir`]); with `replace`, an existing
+/// `dir` is replaced as a whole at [`io::Staging::commit`].
+pub fn stage_scene_dir(
+    staging: &mut io::Staging,
+    dir: &Path,
+    replace: bool,
+    spec: &SceneSpec,
+    scene: &Scene,
+    out: &TraceOutputs,
+) -> Result<()> {
+    let tmp = staging.dir(dir, replace)?;
+    let t = tmp.as_path();
     let to_linear = |v: f64| decode_display(v);
     let bokeh = encode_image(&out.defocus_linear);
     let aif = encode_image(&out.pinhole.aif_linear);
@@ -255,8 +257,6 @@ pub fn write_scene_dir(
             .and_then(|_| w.write_all(b"\n"))
             .map_err(|e| Error::file(&scene_json, format!("write failed: {e}")))
     })?;
-    std::fs::rename(t, dir)
-        .map_err(|e| Error::file(dir, format!("cannot move output into place: {e}")))?;
     Ok(())
 }
 

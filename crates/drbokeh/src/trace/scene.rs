@@ -296,6 +296,31 @@ impl SceneSpec {
         if self.billboards.is_empty() {
             return Err(Error::input("scene", "has no billboards"));
         }
+        if self.billboards.len() > crate::budget::MAX_BILLBOARDS {
+            return Err(Error::input(
+                "scene",
+                format!(
+                    "has {} billboards; at most {} are supported",
+                    self.billboards.len(),
+                    crate::budget::MAX_BILLBOARDS
+                ),
+            ));
+        }
+        let mut depths: Vec<(f64, &str)> = self
+            .billboards
+            .iter()
+            .map(|b| (b.depth_mm, b.name.as_str()))
+            .collect();
+        depths.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some(w) = depths.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Err(Error::input(
+                "scene",
+                format!(
+                    "billboards '{}' and '{}' share depth {} mm; depths must be distinct",
+                    w[0].1, w[1].1, w[0].0
+                ),
+            ));
+        }
         let f = self.optics()?.focal_length_mm();
         for (i, b) in self.billboards.iter().enumerate() {
             let what = format!("billboards[{i}]");
@@ -330,6 +355,15 @@ impl SceneSpec {
                             "solid colour must be >= 0, alpha in [0, 1], gain >= 0",
                         ));
                     }
+                    if color
+                        .iter()
+                        .any(|&c| !((decode_display(c) * gain * alpha) as f32).is_finite())
+                    {
+                        return Err(Error::param(
+                            format!("{what}.texture"),
+                            format!("colour times gain {gain} overflows (not finite in float32)"),
+                        ));
+                    }
                 }
                 TextureSpec::Image { gain, .. } => {
                     if !gain.is_finite() || *gain < 0.0 {
@@ -342,15 +376,62 @@ impl SceneSpec {
         Ok(())
     }
 
+    /// Procedural textures get about two texels per image pixel (at most 4096 per side).
+    fn procedural_size(b: &BillboardSpec, optics: &Optics) -> (usize, usize) {
+        let tw = ((b.size[0] * optics.width_px as f64 * 2.0).ceil() as usize).clamp(2, 4096);
+        let th = ((b.size[1] * optics.height_px as f64 * 2.0).ceil() as usize).clamp(2, 4096);
+        (tw, th)
+    }
+
+    /// Checks the scene's work against the input budget ([`crate::budget`]) before anything
+    /// is generated: the image planes (one per billboard plus
+    /// [`crate::budget::TRACE_EXTRA_LAYERS`]) and every texture's texels (image textures'
+    /// sizes read from their headers, counted twice for their decoded copies).
+    pub fn check_budget(&self, base_dir: &Path) -> Result<()> {
+        let optics = self.optics()?;
+        let (w, h) = (optics.width_px as u64, optics.height_px as u64);
+        let planes = self.billboards.len() as u64 + crate::budget::TRACE_EXTRA_LAYERS;
+        let mut texels = 0u64;
+        for b in &self.billboards {
+            texels = texels.saturating_add(match &b.texture {
+                TextureSpec::Image { path, alpha, .. } => {
+                    let (tw, th) = crate::io::image_dimensions(&base_dir.join(path), "texture")?;
+                    if let Some(a) = alpha {
+                        crate::io::image_dimensions(&base_dir.join(a), "alpha matte")?;
+                    }
+                    2 * tw as u64 * th as u64
+                }
+                TextureSpec::Solid { .. } => 1,
+                TextureSpec::Procedural { .. } => {
+                    let (tw, th) = Self::procedural_size(b, &optics);
+                    tw as u64 * th as u64
+                }
+            });
+        }
+        let units = w
+            .saturating_mul(h)
+            .saturating_mul(planes)
+            .saturating_add(texels);
+        crate::budget::check_work_units(
+            "scene",
+            &format!(
+                "{w}x{h} x {planes} planes ({} billboards + {}) + {texels} texels",
+                self.billboards.len(),
+                crate::budget::TRACE_EXTRA_LAYERS
+            ),
+            units,
+        )
+    }
+
     /// Loads textures (relative paths from `base_dir`) and builds the traceable scene.
+    /// Checks the parameters and the input budget before generating or reading any texture.
     pub fn load(&self, base_dir: &Path) -> Result<Scene> {
         self.validate()?;
+        self.check_budget(base_dir)?;
         let optics = self.optics()?;
         let mut billboards = Vec::with_capacity(self.billboards.len());
         for b in &self.billboards {
-            // Procedural textures get about two texels per image pixel.
-            let tw = ((b.size[0] * optics.width_px as f64 * 2.0).ceil() as usize).clamp(2, 4096);
-            let th = ((b.size[1] * optics.height_px as f64 * 2.0).ceil() as usize).clamp(2, 4096);
+            let (tw, th) = Self::procedural_size(b, &optics);
             let texture = match &b.texture {
                 TextureSpec::Image { path, alpha, gain } => {
                     let p = base_dir.join(path);
@@ -532,6 +613,17 @@ impl Scene {
     /// The renderer-equivalent focus disparity (may fall outside [0, 1] if the focus plane
     /// is outside the billboards' depth range).
     pub fn focus_disparity(&self) -> f64 {
-        self.disparity_of_depth(self.optics.focus_distance_mm())
+        snap_unit(self.disparity_of_depth(self.optics.focus_distance_mm()))
+    }
+}
+
+/// A normalised disparity within 1e-9 of [0, 1] snapped into it: focusing on the nearest or
+/// farthest billboard computes 1 or 0 up to rounding (e.g. 1.0000000000000002), and the
+/// recorded value must be a valid `--focus`.
+pub fn snap_unit(v: f64) -> f64 {
+    if (-1e-9..=1.0 + 1e-9).contains(&v) {
+        v.clamp(0.0, 1.0)
+    } else {
+        v
     }
 }

@@ -140,7 +140,7 @@ impl Texture {
     /// image, or the alpha channel of an RGBA image, of the same size). `gain` scales the
     /// linear colour (use > 1 to make highlights brighter than white).
     pub fn from_files(path: &Path, alpha_path: Option<&Path>, gain: f64) -> Result<Self> {
-        let img = decode_image(path)?;
+        let img = crate::io::decode_as(path, "texture")?;
         let linear = path
             .extension()
             .and_then(|e| e.to_str())
@@ -187,7 +187,16 @@ impl Texture {
                 };
                 (v * gain) as f32 * a
             };
-            data.push([lin(px[0]), lin(px[1]), lin(px[2]), a]);
+            let texel = [lin(px[0]), lin(px[1]), lin(px[2]), a];
+            if !texel.iter().all(|v| v.is_finite()) {
+                return Err(Error::file(
+                    path,
+                    format!(
+                        "texture gain {gain} makes colour values overflow (not finite in float32)"
+                    ),
+                ));
+            }
+            data.push(texel);
         }
         Ok(Texture {
             width: w,
@@ -195,27 +204,6 @@ impl Texture {
             data,
         })
     }
-}
-
-/// Opens and decodes an image file with errors naming it.
-fn decode_image(path: &Path) -> Result<image::DynamicImage> {
-    let file = std::fs::File::open(path)
-        .map_err(|e| Error::file(path, format!("cannot open texture: {e}")))?;
-    let reader = image::ImageReader::new(std::io::BufReader::new(file))
-        .with_guessed_format()
-        .map_err(|e| Error::file(path, format!("cannot read texture: {e}")))?;
-    if reader.format().is_none() {
-        return Err(Error::file(
-            path,
-            "unrecognised texture format (supported: PNG, JPEG, TIFF, EXR)",
-        ));
-    }
-    let img = reader
-        .decode()
-        .map_err(|e| Error::file(path, format!("corrupt or unsupported texture: {e}")))?;
-    crate::image::check_dimensions("texture", img.width() as usize, img.height() as usize)
-        .map_err(|e| e.in_file(path))?;
-    Ok(img)
 }
 
 #[cfg(test)]
