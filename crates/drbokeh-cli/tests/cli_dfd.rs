@@ -35,8 +35,12 @@ fn dfd_writes_disparity_log_and_preview() {
         "1",
         "--blur",
         "4",
-        "--iterations",
+        "--fine-iterations",
         "3",
+        "--patience",
+        "0",
+        "--finest-scale",
+        "0",
         "--layer",
         "gausspsf",
         "--losses",
@@ -51,10 +55,12 @@ fn dfd_writes_disparity_log_and_preview() {
     let log: serde_json::Value =
         serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap();
     assert_eq!(log["layer"], "gausspsf");
-    // 3 iterations at each of 2 scales.
-    assert_eq!(log["log"].as_array().unwrap().len(), 6);
-    assert!(log["log"][0]["l1"].as_f64().unwrap() > 0.0);
-    assert!(log["log"][0]["structure"].is_null());
+    // 3 iterations at the one (full-resolution) scale.
+    assert_eq!(log["scales"].as_array().unwrap().len(), 1);
+    assert_eq!(log["entries"].as_array().unwrap().len(), 3);
+    assert!(log["entries"][0]["l1"].as_f64().unwrap() > 0.0);
+    assert!(log["entries"][0]["structure"].is_null());
+    assert!(d.path().join("disp.confidence.png").exists());
     assert!(d.path().join("disp.preview.png").exists());
 }
 

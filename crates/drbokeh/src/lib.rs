@@ -15,6 +15,7 @@
 //! ```
 
 pub mod aperture;
+pub mod baselines;
 pub mod bench;
 pub mod budget;
 pub mod camera;

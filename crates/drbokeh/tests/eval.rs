@@ -1,6 +1,6 @@
 //! Evaluation: the baselines' known defects, the report files and their schema.
 
-use drbokeh::eval::baselines::{self, Baseline};
+use drbokeh::baselines::{self, Baseline};
 use drbokeh::eval::report::{self, Method, SceneResult};
 use drbokeh::trace::{self, benchmark};
 use drbokeh::{Camera, Image, Layer, LayerStack, NoProgress, Window};

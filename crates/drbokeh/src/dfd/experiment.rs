@@ -139,8 +139,8 @@ pub struct ExperimentRow {
     pub seconds: f64,
 }
 
-/// Runs every layer with every combination on every pair. `template` gives iterations,
-/// learning rate, scales and the camera; `on_run` is called after each (layer, combo, pair).
+/// Runs every layer with every combination on every pair. `template` gives the schedule
+/// and the camera; `on_run` is called after each (layer, combo, pair).
 pub fn run_experiment<T: Real>(
     pairs: &[SyntheticPair<T>],
     layers: &[RenderLayer],
@@ -158,9 +158,9 @@ pub fn run_experiment<T: Real>(
                 opts.layer = layer;
                 opts.weights = combo.weights;
                 opts.terms = combo.terms;
-                let (est, _) =
+                let est =
                     estimate_disparity(&pair.all_in_focus, &pair.defocused, &opts, &mut |_| {})?;
-                per_pair.push(disparity_errors(&est, &pair.disparity));
+                per_pair.push(disparity_errors(&est.disparity, &pair.disparity));
                 on_run(&format!("{} {} pair {}", layer.name(), combo.name, i));
             }
             let n = per_pair.len() as f64;

@@ -2,26 +2,54 @@
 //! image and a defocused image of the same view (known K and focus) by optimising through
 //! a rendering layer, minimising `L = w1 |render - target|_1 + wg G + wh HSSIM`.
 //!
-//! The optimiser is Adam on the disparity values, clamped to [0, 1] after each step, run
-//! coarse to fine: at scale `s` both images are average-pooled `2^s` times and K is divided
-//! by `2^s` (blur radii shrink with the image); the result is upsampled to initialise the
-//! next finer scale. Coarse scales see large structures with small, cheap windows.
-//! Loss terms that need more pixels than a scale has (HSSIM: 31 per side, smoothness: 16)
-//! are left out at that scale, and the log says so.
+//! How ([`estimate_disparity`], `docs/dfd.md` for the measurements behind each choice):
+//! - **Coarse to fine.** Both images are pooled `2^s` times in linear light and K is divided
+//!   by `2^s`; an iteration at scale `s` costs about `16^-s` of a full-resolution one (a
+//!   quarter of the pixels, a quarter of the disc area), so the coarse scales do most of
+//!   the work and the finest scale refines. Each scale stops on a plateau of its loss.
+//! - **Adam** on the disparity, parameterised as a sigmoid of an unbounded variable (or
+//!   clamped to [0, 1]).
+//! - **Clipped highlights.** A pixel clipped in the all-in-focus image may have been much
+//!   brighter; its true brightness shows in the defocused image as a bright ball. With
+//!   [`Highlights::Model`] the linear brightness of every clipped pixel is a second unknown,
+//!   optimised jointly with the disparity (the render's colour gradient); with
+//!   [`Highlights::Mask`] the pixels such a highlight could reach are left out of the
+//!   loss. Pixels clipped in the defocused image are always left out (the sensor clipped
+//!   them), and the render is clipped to [0, 1] as the sensor would.
+//! - **Confidence.** Where the pair carries no depth information (flat regions, the
+//!   render does not change with disparity) the estimate is a guess; [`DfdResult`] has a
+//!   confidence map: the render's sensitivity to disparity around each pixel.
+//!
+//! The log ([`log::DfdLog`]) records every option, every iteration's loss terms and the
+//! time spent per scale.
 
+pub mod benchmark;
 pub mod experiment;
+mod highlights;
 pub mod layers;
+pub mod log;
+mod maps;
+mod objective;
+mod optimise;
+pub mod report;
+mod sweep;
 
-pub use layers::{render_layer, render_layer_vjp, render_layer_vjp_on, RenderLayer};
+pub use layers::{
+    render_layer, render_layer_on, render_layer_vjp, render_layer_vjp_on, RenderLayer,
+};
+pub use log::{DfdLog, LogEntry, RunOptions, ScaleLog};
+pub use optimise::estimate_disparity;
 
-use crate::camera::Window;
 use crate::image::Image;
-use crate::loss;
 use crate::presets::RenderSettings;
-use crate::{Error, Real, Result};
+use crate::{Engine, Error, Real, Result};
+use serde::{Deserialize, Serialize};
+
+/// Weight of the edge-aware smoothness in [`LossWeights::DEFAULT`].
+pub const DEFAULT_SMOOTHNESS_WEIGHT: f64 = 20.0;
 
 /// Weights of the three loss terms; 0 turns a term off.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LossWeights {
     /// Weight of the mean absolute error between render and target.
     pub l1: f64,
@@ -39,7 +67,16 @@ impl LossWeights {
         hssim: 10.0,
     };
 
-    /// Keeps the paper's weights for the named terms (`l1`, `smooth`, `ssim11`... see
+    /// The defaults: the paper's L1 and HSSIM weights with a stronger smoothness
+    /// ([`DEFAULT_SMOOTHNESS_WEIGHT`]; one disparity map is optimised, not a network, and
+    /// the paper's 0.5 leaves flat regions to noise: `docs/dfd.md`).
+    pub const DEFAULT: LossWeights = LossWeights {
+        l1: 0.5,
+        smoothness: DEFAULT_SMOOTHNESS_WEIGHT,
+        hssim: 10.0,
+    };
+
+    /// Keeps the default weights for the named terms (`l1`, `smooth`, `ssim`, `hssim`; see
     /// [`LossTerms`]) and zeroes the others.
     pub fn from_terms(terms: &str) -> Result<(Self, LossTerms)> {
         let mut w = LossWeights {
@@ -50,12 +87,12 @@ impl LossWeights {
         let mut single_ssim = false;
         for t in terms.split(',').map(str::trim) {
             match t {
-                "l1" => w.l1 = Self::PAPER.l1,
-                "smooth" | "smoothness" | "g" => w.smoothness = Self::PAPER.smoothness,
-                "hssim" => w.hssim = Self::PAPER.hssim,
+                "l1" => w.l1 = Self::DEFAULT.l1,
+                "smooth" | "smoothness" | "g" => w.smoothness = Self::DEFAULT.smoothness,
+                "hssim" => w.hssim = Self::DEFAULT.hssim,
                 "ssim" => {
                     // A single 11-window SSIM with the same total weight as HSSIM's five.
-                    w.hssim = Self::PAPER.hssim;
+                    w.hssim = Self::DEFAULT.hssim;
                     single_ssim = true;
                 }
                 _ => {
@@ -81,7 +118,8 @@ impl LossWeights {
 }
 
 /// Which structural term the `hssim` weight applies to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LossTerms {
     /// HSSIM over windows 3, 5, 11, 21, 31.
     Hssim,
@@ -89,10 +127,183 @@ pub enum LossTerms {
     SingleSsim,
 }
 
+/// How the optimiser keeps the disparity in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Parameterisation {
+    /// Adam on the disparity itself, clamped to [0, 1] after each step.
+    Clamped,
+    /// Adam on an unbounded `u`, disparity `= 1 / (1 + exp(-u))`.
+    Sigmoid,
+}
+
+impl std::str::FromStr for Parameterisation {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "clamped" => Ok(Parameterisation::Clamped),
+            "sigmoid" => Ok(Parameterisation::Sigmoid),
+            _ => Err(Error::param(
+                "--param",
+                format!("unknown parameterisation '{s}' (sigmoid, clamped)"),
+            )),
+        }
+    }
+}
+
+/// The optimiser of the disparity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Optimiser {
+    /// Adam: momentum and second moment per pixel, so every pixel steps about the learning
+    /// rate, however little its gradient says.
+    Adam,
+    /// Adam with one second moment for the whole map (the mean squared gradient): a pixel's
+    /// step is proportional to its gradient, so pixels the data says little about move
+    /// little and the smoothness term fills them in. Steps are capped at 3 learning rates.
+    SharedAdam,
+}
+
+impl std::str::FromStr for Optimiser {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "adam" => Ok(Optimiser::Adam),
+            "shared-adam" => Ok(Optimiser::SharedAdam),
+            _ => Err(Error::param(
+                "--optimiser",
+                format!("unknown optimiser '{s}' (shared-adam, adam)"),
+            )),
+        }
+    }
+}
+
+/// The edge-aware weighted median that refines the optimised disparity
+/// (`maps::weighted_median`): classical disparity refinement, which moves depth edges onto
+/// colour edges and removes isolated errors.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MedianRefine {
+    /// Window radius as a fraction of the largest blur radius `K max|d|` (at least 1 px).
+    pub radius_blur_fraction: f64,
+    /// Colour distance (encoded, RMS over channels) of weight `exp(-1/2)`.
+    pub sigma: f64,
+}
+
+/// What to do about pixels clipped (at or above white) in the all-in-focus image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Highlights {
+    /// Render them as they are (at most white).
+    Ignore,
+    /// Leave out of the loss every pixel within the largest possible blur radius of one.
+    Mask,
+    /// Optimise their linear brightness (at least white) together with the disparity.
+    Model,
+}
+
+impl std::str::FromStr for Highlights {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "ignore" => Ok(Highlights::Ignore),
+            "mask" => Ok(Highlights::Mask),
+            "model" => Ok(Highlights::Model),
+            _ => Err(Error::param(
+                "--highlights",
+                format!("unknown highlight handling '{s}' (model, mask, ignore)"),
+            )),
+        }
+    }
+}
+
+/// How the disparity starts.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Init {
+    /// The same disparity everywhere.
+    Constant(f64),
+    /// At the coarsest scale, the best of `n` constant disparities per pixel (the render
+    /// at each constant disparity compared with the target over a small neighbourhood):
+    /// a plane sweep.
+    Sweep(usize),
+}
+
+/// Scales, iterations, steps and stopping rule.
+///
+/// Scale `s` is the pair pooled `2^s` times (in linear light) with K divided by `2^s`.
+/// The optimiser runs at the finest scale [`Schedule::finest_scale`] and, before it, at
+/// [`Schedule::coarse_scales`] coarser ones; the result is upsampled (bilinear) to full
+/// resolution.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Schedule {
+    /// The finest scale optimised (0 = full resolution). `None` chooses the finest scale
+    /// whose iteration costs at most [`Schedule::AUTO_FINEST_TAPS`] (pixels times the disc
+    /// area of the largest blur), keeping at least [`Schedule::MIN_SIDE`] pixels a side.
+    pub finest_scale: Option<usize>,
+    /// Coarser scales optimised before the finest one (each initialises the next).
+    pub coarse_scales: usize,
+    /// Most Adam iterations at each coarse scale.
+    pub iterations: usize,
+    /// Most Adam iterations at the finest scale optimised.
+    pub fine_iterations: usize,
+    /// Adam learning rate (parameter units per step, roughly) at the coarsest scale.
+    pub learning_rate: f64,
+    /// Factor on the learning rate at each finer scale.
+    pub learning_rate_decay: f64,
+    /// Stop a scale when its loss has not improved by [`Schedule::min_improvement`] (relative)
+    /// over this many iterations; 0 never stops early.
+    pub patience: usize,
+    /// Relative improvement that counts for [`Schedule::patience`].
+    pub min_improvement: f64,
+}
+
+impl Schedule {
+    /// Smallest side of any optimised scale.
+    pub const MIN_SIDE: usize = 32;
+
+    /// Cost budget of one iteration at the finest scale when [`Schedule::finest_scale`] is
+    /// `None`: pixels times the disc area `pi (K max|d| + 1)^2` of the largest blur.
+    pub const AUTO_FINEST_TAPS: f64 = 5.0e6;
+
+    /// The finest scale to optimise for a `width x height` pair with largest blur radius
+    /// `max_blur_px` (at full resolution).
+    pub fn finest_for(&self, width: usize, height: usize, max_blur_px: f64) -> usize {
+        let mut deepest = 0;
+        while (width.min(height) >> (deepest + 1)) >= Self::MIN_SIDE && deepest < 8 {
+            deepest += 1;
+        }
+        if let Some(s) = self.finest_scale {
+            return s.min(deepest);
+        }
+        let mut s = 0;
+        while s < deepest {
+            let f = (1u64 << s) as f64;
+            let px = (width as f64 / f) * (height as f64 / f);
+            let r = max_blur_px / f + 1.0;
+            if px * std::f64::consts::PI * r * r <= Self::AUTO_FINEST_TAPS {
+                break;
+            }
+            s += 1;
+        }
+        s
+    }
+
+    /// The number of pyramid levels (full resolution included) for `finest`: the finest
+    /// scale plus the coarse ones, as long as a side keeps [`Schedule::MIN_SIDE`] pixels.
+    pub fn levels_for(&self, width: usize, height: usize, finest: usize) -> usize {
+        let mut n = finest + 1;
+        while n < finest + 1 + self.coarse_scales && (width.min(height) >> n) >= Self::MIN_SIDE {
+            n += 1;
+        }
+        n
+    }
+}
+
 /// Options of one depth-from-defocus run.
 #[derive(Clone, Debug)]
 pub struct DfdOptions {
-    /// Camera of the defocused image (focus, K, gamma); the window is chosen per scale.
+    /// Camera of the defocused image (focus, K, gamma) and preset; the window is chosen per
+    /// scale.
     pub settings: RenderSettings,
     /// Rendering layer to optimise through.
     pub layer: RenderLayer,
@@ -100,229 +311,213 @@ pub struct DfdOptions {
     pub weights: LossWeights,
     /// Structural term.
     pub terms: LossTerms,
-    /// Adam iterations per scale.
-    pub iterations: usize,
-    /// Adam learning rate (disparity units per step, roughly).
-    pub learning_rate: f64,
-    /// Number of scales (1 = full resolution only).
-    pub scales: usize,
-    /// Initial disparity everywhere.
-    pub init: f64,
-    /// Engine of the Dr.Bokeh layer's forward and adjoint ([`crate::render_with_tape_on`]);
-    /// default [`crate::Engine::Threaded`] (the exact gradient).
-    pub engine: crate::Engine,
+    /// Edge sensitivity `s` of the smoothness term: its edge weight is `exp(-s |dI|)` (the
+    /// paper's G has `s = 1`); larger lets disparity edges form at colour edges.
+    pub edge_sensitivity: f64,
+    /// Iterations and steps.
+    pub schedule: Schedule,
+    /// How the disparity is kept in range.
+    pub parameterisation: Parameterisation,
+    /// The optimiser.
+    pub optimiser: Optimiser,
+    /// Clipped highlights of the all-in-focus image.
+    pub highlights: Highlights,
+    /// Weighted-median refinement of the result (`None`: off).
+    pub median: Option<MedianRefine>,
+    /// Initial disparity.
+    pub init: Init,
+    /// A starting disparity map (the pair's size, one channel) instead of [`DfdOptions::init`];
+    /// pooled to the coarsest scale.
+    pub initial_disparity: Option<Image<f32>>,
+    /// Engine of the Dr.Bokeh layer's forward and adjoint ([`crate::render_with_tape_on`]).
+    pub engine: Engine,
 }
 
 impl DfdOptions {
-    /// Defaults: paper weights with HSSIM, 200 iterations per scale, learning rate 0.02,
-    /// 2 scales, initial disparity 0.5.
+    /// The defaults, measured on ray-traced tuning scenes (`docs/dfd.md`): L1 0.5, edge-aware
+    /// smoothness [`DEFAULT_SMOOTHNESS_WEIGHT`], HSSIM 10; a plane sweep of 9 disparities
+    /// as the start; one scale, the finest within the cost budget; at most 40 iterations,
+    /// stopping after 10 without a 0.1 % improvement; Adam at learning rate 0.1 on the
+    /// sigmoid's variable; highlights modelled (energy start, then optimised); the fast
+    /// engine.
     pub fn new(settings: RenderSettings, layer: RenderLayer) -> Self {
         DfdOptions {
             settings,
             layer,
-            weights: LossWeights::PAPER,
+            weights: LossWeights::DEFAULT,
             terms: LossTerms::Hssim,
-            iterations: 200,
-            learning_rate: 0.02,
-            scales: 2,
-            init: 0.5,
-            engine: crate::Engine::Threaded,
+            edge_sensitivity: 10.0,
+            schedule: Schedule {
+                finest_scale: None,
+                coarse_scales: 0,
+                iterations: 100,
+                fine_iterations: 40,
+                learning_rate: 0.1,
+                learning_rate_decay: 0.7,
+                patience: 10,
+                min_improvement: 1e-3,
+            },
+            parameterisation: Parameterisation::Sigmoid,
+            optimiser: Optimiser::Adam,
+            highlights: Highlights::Model,
+            median: Some(MedianRefine {
+                radius_blur_fraction: 1.5,
+                sigma: 0.05,
+            }),
+            init: Init::Sweep(9),
+            initial_disparity: None,
+            engine: Engine::Fast,
+        }
+    }
+
+    /// Checks every option's range; messages name the CLI options.
+    pub fn validate(&self) -> Result<()> {
+        self.settings.validate()?;
+        let s = &self.schedule;
+        if s.coarse_scales > 8 {
+            return Err(Error::param("--coarse-scales", "must be between 0 and 8"));
+        }
+        if s.finest_scale.is_some_and(|f| f > 8) {
+            return Err(Error::param("--finest-scale", "must be between 0 and 8"));
+        }
+        if s.iterations == 0 || s.iterations > 100_000 {
+            return Err(Error::param("--iterations", "must be between 1 and 100000"));
+        }
+        if s.fine_iterations == 0 || s.fine_iterations > 100_000 {
+            return Err(Error::param(
+                "--fine-iterations",
+                "must be between 1 and 100000",
+            ));
+        }
+        if !(s.learning_rate > 0.0 && s.learning_rate.is_finite() && s.learning_rate <= 100.0) {
+            return Err(Error::param("--lr", "learning rate must be in (0, 100]"));
+        }
+        if !(s.learning_rate_decay > 0.0 && s.learning_rate_decay <= 1.0) {
+            return Err(Error::param("--lr-decay", "must be in (0, 1]"));
+        }
+        if !(s.min_improvement >= 0.0 && s.min_improvement < 1.0) {
+            return Err(Error::param("--min-improvement", "must be in [0, 1)"));
+        }
+        if !(self.edge_sensitivity >= 0.0 && self.edge_sensitivity <= 1000.0) {
+            return Err(Error::param("--edge-sensitivity", "must be in [0, 1000]"));
+        }
+        if let Some(m) = self.median {
+            if !(m.radius_blur_fraction > 0.0 && m.radius_blur_fraction <= 10.0) {
+                return Err(Error::param("--median-radius", "must be in (0, 10]"));
+            }
+            if !(m.sigma > 0.0 && m.sigma <= 10.0) {
+                return Err(Error::param("--median-sigma", "must be in (0, 10]"));
+            }
+        }
+        for (name, w) in [
+            ("l1", self.weights.l1),
+            ("smoothness", self.weights.smoothness),
+            ("hssim", self.weights.hssim),
+        ] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(Error::param(
+                    "--losses",
+                    format!("weight of {name} must be finite and >= 0, got {w}"),
+                ));
+            }
+        }
+        match self.init {
+            Init::Constant(v) if !(0.0..=1.0).contains(&v) => Err(Error::param(
+                "--init",
+                format!("initial disparity must be in [0, 1], got {v}"),
+            )),
+            Init::Sweep(n) if !(2..=64).contains(&n) => Err(Error::param(
+                "--init",
+                format!("a sweep needs 2 to 64 disparities, got {n}"),
+            )),
+            _ => Ok(()),
         }
     }
 }
 
-/// One line of the loss curve.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct LogEntry {
-    /// Scale (0 = full resolution).
-    pub scale: usize,
-    /// Iteration within the scale.
-    pub iteration: usize,
-    /// Weighted total loss.
-    pub loss: f64,
-    /// Unweighted L1 (null if off).
-    pub l1: Option<f64>,
-    /// Unweighted smoothness (null if off or the scale is too small).
-    pub smoothness: Option<f64>,
-    /// Unweighted structural term (null if off or the scale is too small).
-    pub structure: Option<f64>,
+/// What [`estimate_disparity`] returns.
+#[derive(Clone, Debug)]
+pub struct DfdResult<T> {
+    /// Estimated disparity (HxWx1, in [0, 1]).
+    pub disparity: Image<T>,
+    /// Confidence in [0, 1] (HxWx1): how much the render changes with the disparity around
+    /// each pixel, `s / (s + s0)` with `s` the mean absolute change of the encoded render per
+    /// unit disparity over a 5x5 neighbourhood and `s0` = [`CONFIDENCE_HALF_SENSITIVITY`].
+    /// Near 0 where the pair carries no depth information.
+    pub confidence: Image<T>,
+    /// Everything the run did.
+    pub log: DfdLog,
 }
 
-fn upsample_nearest<T: Real>(img: &Image<T>, w: usize, h: usize) -> Image<T> {
-    let mut out = Image::new(w, h, img.channels);
-    for y in 0..h {
-        for x in 0..w {
-            let (sx, sy) = ((x / 2).min(img.width - 1), (y / 2).min(img.height - 1));
-            for c in 0..img.channels {
-                *out.at_mut(x, y, c) = img.at(sx, sy, c);
-            }
-        }
-    }
-    out
-}
-
-/// Estimates disparity from an all-in-focus image and a defocused image (both HxWx3,
-/// display-encoded). `on_iteration` sees each log entry as it is made (for progress).
-pub fn estimate_disparity<T: Real>(
-    all_in_focus: &Image<T>,
-    defocused: &Image<T>,
-    options: &DfdOptions,
-    on_iteration: &mut dyn FnMut(&LogEntry),
-) -> Result<(Image<T>, Vec<LogEntry>)> {
-    if all_in_focus.channels != 3 || defocused.channels != 3 {
-        return Err(Error::input(
-            "depth from defocus",
-            "both images must have 3 channels",
-        ));
-    }
-    if (all_in_focus.width, all_in_focus.height) != (defocused.width, defocused.height) {
-        return Err(Error::input(
-            "depth from defocus",
-            format!(
-                "all-in-focus image is {}x{} but the defocused image is {}x{}",
-                all_in_focus.width, all_in_focus.height, defocused.width, defocused.height
-            ),
-        ));
-    }
-    all_in_focus.check_finite("all-in-focus image")?;
-    defocused.check_finite("defocused image")?;
-    options.settings.validate()?;
-    if options.scales == 0 || options.scales > 8 {
-        return Err(Error::param("--scales", "must be between 1 and 8"));
-    }
-    if !(options.learning_rate > 0.0 && options.learning_rate.is_finite()) {
-        return Err(Error::param("--lr", "learning rate must be positive"));
-    }
-    let mut aifs = vec![all_in_focus.clone()];
-    let mut targets = vec![defocused.clone()];
-    for _ in 1..options.scales {
-        let (a, t) = (aifs.last().unwrap(), targets.last().unwrap());
-        if a.width < 4 || a.height < 4 {
-            break;
-        }
-        aifs.push(loss::pyramid::avg_pool2(a)?);
-        targets.push(loss::pyramid::avg_pool2(t)?);
-    }
-    let coarsest = aifs.last().unwrap();
-    let mut disparity = Image::from_vec(
-        coarsest.width,
-        coarsest.height,
-        1,
-        vec![T::c(options.init); coarsest.width * coarsest.height],
-    )?;
-    let mut log = Vec::new();
-    for scale in (0..aifs.len()).rev() {
-        let (aif, target) = (&aifs[scale], &targets[scale]);
-        if disparity.width != aif.width || disparity.height != aif.height {
-            disparity = upsample_nearest(&disparity, aif.width, aif.height);
-        }
-        let mut settings = options.settings.clone();
-        settings.camera.blur_k = options.settings.camera.blur_k / (1u64 << scale) as f64;
-        let f = settings.camera.focus_disparity;
-        settings.camera.window = Window::auto(settings.camera.blur_k * f.max(1.0 - f) + 1.0);
-        let min_side = aif.width.min(aif.height);
-        let use_structure = options.weights.hssim > 0.0 && min_side >= 31;
-        let use_smooth = options.weights.smoothness > 0.0 && min_side >= 16;
-        let n = disparity.data.len();
-        let (mut m, mut v) = (vec![0.0f64; n], vec![0.0f64; n]);
-        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
-        for it in 0..options.iterations {
-            let mut entry = LogEntry {
-                scale,
-                iteration: it,
-                loss: 0.0,
-                l1: None,
-                smoothness: None,
-                structure: None,
-            };
-            let weights = options.weights;
-            let terms = options.terms;
-            let (_, mut grad) = render_layer_vjp_on(
-                options.layer,
-                options.engine,
-                aif,
-                &disparity,
-                &settings,
-                |render: &Image<T>| {
-                    let mut g = Image::new(render.width, render.height, 3);
-                    if weights.l1 > 0.0 {
-                        let (val, gl) = loss::l1_grad(render, target)?;
-                        entry.l1 = Some(val.f64());
-                        entry.loss += weights.l1 * val.f64();
-                        for (a, b) in g.data.iter_mut().zip(&gl.data) {
-                            *a = *a + T::c(weights.l1) * *b;
-                        }
-                    }
-                    if use_structure {
-                        let (val, gs) = match terms {
-                            LossTerms::Hssim => loss::hssim_grad(render, target)?,
-                            LossTerms::SingleSsim => {
-                                let (s, gs) =
-                                    loss::ssim_grad(render, target, &loss::SsimWindow::sized(11)?)?;
-                                let k = T::c(loss::HSSIM_WINDOWS.len() as f64);
-                                (
-                                    k * (T::one() - s),
-                                    Image {
-                                        data: gs.data.iter().map(|&v| -k * v).collect(),
-                                        ..gs
-                                    },
-                                )
-                            }
-                        };
-                        entry.structure = Some(val.f64());
-                        entry.loss += weights.hssim * val.f64();
-                        for (a, b) in g.data.iter_mut().zip(&gs.data) {
-                            *a = *a + T::c(weights.hssim) * *b;
-                        }
-                    }
-                    Ok(g)
-                },
-            )?;
-            if use_smooth {
-                let (val, gs) = loss::edge_aware_smoothness_grad(&disparity, aif)?;
-                entry.smoothness = Some(val.f64());
-                entry.loss += options.weights.smoothness * val.f64();
-                for (a, b) in grad.data.iter_mut().zip(&gs.data) {
-                    *a = *a + T::c(options.weights.smoothness) * *b;
-                }
-            }
-            on_iteration(&entry);
-            log.push(entry);
-            let t = (it + 1) as i32;
-            for i in 0..n {
-                let g = grad.data[i].f64();
-                m[i] = b1 * m[i] + (1.0 - b1) * g;
-                v[i] = b2 * v[i] + (1.0 - b2) * g * g;
-                let (mh, vh) = (m[i] / (1.0 - b1.powi(t)), v[i] / (1.0 - b2.powi(t)));
-                let step = options.learning_rate * mh / (vh.sqrt() + eps);
-                disparity.data[i] = T::c((disparity.data[i].f64() - step).clamp(0.0, 1.0));
-            }
-        }
-    }
-    Ok((disparity, log))
-}
+/// The sensitivity (encoded intensity per unit disparity) at which confidence is 1/2.
+pub const CONFIDENCE_HALF_SENSITIVITY: f64 = 0.05;
 
 /// Disparity error statistics against ground truth.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DisparityErrors {
-    /// Mean absolute error.
+    /// Mean absolute error (normalised disparity).
     pub mae: f64,
-    /// Root mean squared error.
+    /// Root mean squared error (normalised disparity).
     pub rmse: f64,
-    /// Fraction of pixels with `max(est/gt, gt/est) < 1.25`.
+    /// Fraction of pixels with `max(est/gt, gt/est) < 1.25`, the ratio taken of depths when
+    /// a [`DepthRange`] is known (a normalised disparity of 0 is a finite depth), else of
+    /// the disparities.
     pub within_1_25: f64,
 }
 
-/// Compares an estimate with ground truth (same size, one channel).
+/// The metric range behind a normalised disparity: `disp = (1/z - 1/z_far) / (1/z_near -
+/// 1/z_far)`, so `z = 1 / (1/z_far + disp (1/z_near - 1/z_far))`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DepthRange {
+    /// Nearest depth (any unit, > 0).
+    pub near: f64,
+    /// Farthest depth (same unit, > near).
+    pub far: f64,
+}
+
+impl DepthRange {
+    /// Depth of a normalised disparity (clamped to [0, 1]).
+    pub fn depth(&self, disparity: f64) -> f64 {
+        let d = disparity.clamp(0.0, 1.0);
+        1.0 / (1.0 / self.far + d * (1.0 / self.near - 1.0 / self.far))
+    }
+}
+
+/// Compares an estimate with ground truth (same size, one channel); the ratio of
+/// disparities for `within_1_25`.
 pub fn disparity_errors<T: Real>(estimate: &Image<T>, truth: &Image<T>) -> DisparityErrors {
-    let n = truth.data.len() as f64;
-    let (mut abs, mut sq, mut ok) = (0.0, 0.0, 0.0);
-    for (&e, &t) in estimate.data.iter().zip(&truth.data) {
+    masked_disparity_errors(estimate, truth, None, |_| true).unwrap_or(DisparityErrors {
+        mae: f64::NAN,
+        rmse: f64::NAN,
+        within_1_25: f64::NAN,
+    })
+}
+
+/// [`disparity_errors`] over the pixels `i` where `keep(i)`, with `within_1_25` on depths
+/// when `depth` is given; `None` if no pixel is kept.
+pub fn masked_disparity_errors<T: Real>(
+    estimate: &Image<T>,
+    truth: &Image<T>,
+    depth: Option<DepthRange>,
+    keep: impl Fn(usize) -> bool,
+) -> Option<DisparityErrors> {
+    let (mut n, mut abs, mut sq, mut ok) = (0.0, 0.0, 0.0, 0.0);
+    for (i, (&e, &t)) in estimate.data.iter().zip(&truth.data).enumerate() {
+        if !keep(i) {
+            continue;
+        }
         let (e, t) = (e.f64(), t.f64());
+        n += 1.0;
         abs += (e - t).abs();
         sq += (e - t) * (e - t);
-        let ratio = if e > 0.0 && t > 0.0 {
-            (e / t).max(t / e)
+        let (a, b) = match depth {
+            Some(r) => (r.depth(e), r.depth(t)),
+            None => (e, t),
+        };
+        let ratio = if a > 0.0 && b > 0.0 {
+            (a / b).max(b / a)
+        } else if a == b {
+            1.0
         } else {
             f64::INFINITY
         };
@@ -330,9 +525,9 @@ pub fn disparity_errors<T: Real>(estimate: &Image<T>, truth: &Image<T>) -> Dispa
             ok += 1.0;
         }
     }
-    DisparityErrors {
+    (n > 0.0).then(|| DisparityErrors {
         mae: abs / n,
         rmse: (sq / n).sqrt(),
         within_1_25: ok / n,
-    }
+    })
 }

@@ -2,7 +2,7 @@
 //! classical baseline or a drbokeh preset) fed either the all-in-focus image + disparity or
 //! the ground-truth layer stack.
 
-use super::baselines::Baseline;
+use crate::baselines::Baseline;
 use crate::camera::Camera;
 use crate::image::Image;
 use crate::presets::{Preset, RenderSettings};
@@ -14,15 +14,15 @@ use serde::Serialize;
 /// A method evaluated on the benchmark.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Method {
-    /// Naive gather ([`crate::eval::baselines::naive_gather`]) on image + disparity.
+    /// Naive gather ([`crate::baselines::naive_gather`]) on image + disparity.
     Gather,
-    /// Naive scatter ([`crate::eval::baselines::naive_scatter`]) on image + disparity.
+    /// Naive scatter ([`crate::baselines::naive_scatter`]) on image + disparity.
     Scatter,
-    /// Layered disc blur ([`crate::eval::baselines::layered_disc`]) on image + disparity.
+    /// Layered disc blur ([`crate::baselines::layered_disc`]) on image + disparity.
     Layered,
     /// Layered disc blur on the ground-truth layer stack.
     LayeredGt,
-    /// GaussPSF ([`crate::eval::baselines::gauss_psf`]) on image + disparity.
+    /// GaussPSF ([`crate::baselines::gauss_psf`]) on image + disparity.
     GaussPsf,
     /// The `paper` preset on a single opaque layer (image + disparity).
     PaperAif,

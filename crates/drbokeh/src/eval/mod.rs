@@ -11,10 +11,9 @@
 //! | `images.rs`, `tables.rs`, `plots.rs`, `html.rs` | pictures, CSV/Markdown, SVG, HTML |
 //! | [`report`] | writes a report; gathers the above for callers |
 //! | [`gallery`] | the refocus gallery |
-//! | [`baselines`] | classical renderers |
+//! | [`crate::baselines`] | classical renderers (shared with `dfd`) |
 //! | [`metrics`] | PSNR, SSIM (matching scikit-image), MS-SSIM and error maps, on display-encoded images with data range 1 |
 
-pub mod baselines;
 pub mod gallery;
 mod html;
 mod images;

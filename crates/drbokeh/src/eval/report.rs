@@ -3,7 +3,7 @@
 //!
 //! Methods ([`Method`]) and their inputs (each scene directory provides them):
 //! - on the all-in-focus image `aif.png` + `disparity.npy`: the baselines `gather`,
-//!   `scatter`, `layered`, `gausspsf` ([`super::baselines`]) and `paper-aif` (the `paper`
+//!   `scatter`, `layered`, `gausspsf` ([`crate::baselines`]) and `paper-aif` (the `paper`
 //!   preset on a single opaque layer);
 //! - on the ground-truth layer stack `layers.npz`: `layered-gt` (the layered baseline) and
 //!   `paper-gt` (the `paper` preset); `physical-aif` and `physical-gt`, the `physical` preset on

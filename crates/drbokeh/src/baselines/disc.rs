@@ -1,17 +1,5 @@
-//! Classical bokeh renderers, the baselines Dr.Bokeh is compared with.
-//!
-//! Every baseline takes the renderer's inputs (an all-in-focus image + disparity map, or a
-//! [`LayerStack`]) and a [`Camera`] (blur `K`, focus `f`, gamma, offset), works in linear
-//! light `(I + offset)^gamma` and encodes its output with the same transfer, so all methods
-//! are compared on equal terms. The optional highlight boost is not applied.
-//!
-//! **Blur size convention.** The circle of confusion (CoC) of a pixel of disparity `disp`
-//! has radius `rho = K |disp - f|` pixels, exactly the renderer's `r = K|d| + 1` without the
-//! `+1` pixel footprint: the renderer needs the `+1` because its soft step
-//! `S(r - dist)` falls to one half at `dist = r - ln(10)/3 = r - 0.77`, whereas the
-//! baselines' discs are area-sampled (each pixel weighted by how much of it the disc
-//! covers), so a disc of radius `rho` already has its edge at `rho`. A disc never gets
-//! smaller than [`MIN_DISC_RADIUS_PX`] (one pixel: an in-focus pixel maps onto itself).
+//! The disc baselines: naive gather, naive scatter and the layered disc blur (module docs
+//! of [`crate::baselines`] say what each models and ignores).
 //!
 //! **The anti-aliased disc.** Each pixel row of a disc of radius `rho` is sampled at four
 //! sub-rows `t`; a sub-row is the chord `|dx| <= h = sqrt(rho^2 - t^2)`, and each pixel
@@ -19,38 +7,10 @@
 //! fraction). So the kernel is round even for small radii, its weight is continuous in
 //! `rho`, and its area is close to `pi rho^2`. Chords are summed with per-row prefix sums,
 //! so a disc costs `O(rho)` per pixel, not `O(rho^2)`.
-//!
-//! **Borders.** Sums run over in-image pixels only and are normalised by the in-image
-//! weight (no padding), as in [`crate::dfd::layers`].
-//!
-//! The baselines ([`Baseline`]):
-//! - [`naive_gather`]: each pixel averages the disc of its *own* CoC. Models blur size;
-//!   ignores occlusion and the fact that light comes from the *sources'* discs: a blurred
-//!   pixel next to a sharp object averages that object in (colour bleeding, a halo of the
-//!   sharp object's colour), and a sharp pixel never receives light from blurred
-//!   neighbours.
-//! - [`naive_scatter`]: each pixel splats its disc (unit energy, weight `1/area`), and each
-//!   receiver normalises by the weights it received (the classical half of BokehMe). Models
-//!   where light goes; ignores depth order: a blurred background's discs spread over an
-//!   in-focus foreground.
-//! - [`layered_disc`]: disparity is cut into planes (default [`LAYERED_PLANES`]), each
-//!   plane's premultiplied colour and alpha is blurred by the disc of the plane's CoC, and
-//!   planes are composited back to front with `over` (the classical core of MPI/MPIB-style
-//!   methods). Models occlusion between planes; ignores what an all-in-focus image does
-//!   not show: a background plane has holes where the foreground covered it, which its blur
-//!   turns into missing coverage (dark fringes), exactly as a classical layered renderer
-//!   without inpainting does. Fed the ground-truth layer stack, it has the hidden content.
-//!   It also quantises continuous disparity to the planes.
-//! - [`gauss_psf`]: the GaussPSF layer of [`crate::dfd::layers`] (Gur & Wolf 2019): each
-//!   source spreads a Gaussian of `sigma ~ rho / 2`, gathered and normalised. Models blur
-//!   size with a smooth kernel; ignores occlusion (like the naive scatter) and the disc
-//!   shape of real bokeh.
 
-use crate::camera::{Camera, Window, MAX_WINDOW_SIZE};
-use crate::dfd::layers::{render_layer, RenderLayer};
+use crate::camera::Camera;
 use crate::image::Image;
 use crate::model;
-use crate::presets::RenderSettings;
 use crate::stack::LayerStack;
 use crate::{Error, Real, Result};
 use rayon::prelude::*;
@@ -60,108 +20,6 @@ pub const LAYERED_PLANES: usize = 32;
 
 /// The smallest disc radius (pixels): a disc of radius 1/2 is exactly one pixel.
 pub const MIN_DISC_RADIUS_PX: f64 = 0.5;
-
-/// A classical baseline renderer.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Baseline {
-    /// [`naive_gather`].
-    NaiveGather,
-    /// [`naive_scatter`].
-    NaiveScatter,
-    /// [`layered_disc`] with [`LAYERED_PLANES`] planes.
-    LayeredDisc,
-    /// [`gauss_psf`].
-    GaussPsf,
-}
-
-impl Baseline {
-    /// All baselines.
-    pub const ALL: [Baseline; 4] = [
-        Baseline::NaiveGather,
-        Baseline::NaiveScatter,
-        Baseline::LayeredDisc,
-        Baseline::GaussPsf,
-    ];
-
-    /// Short name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Baseline::NaiveGather => "gather",
-            Baseline::NaiveScatter => "scatter",
-            Baseline::LayeredDisc => "layered",
-            Baseline::GaussPsf => "gausspsf",
-        }
-    }
-
-    /// Renders a layer stack. [`Baseline::LayeredDisc`] uses the layers as they are; the
-    /// others see the stack as an image + disparity pair ([`flatten`]; a single-layer stack
-    /// is exactly its colour and disparity).
-    pub fn render<T: Real>(self, stack: &LayerStack<T>, camera: &Camera) -> Result<Image<T>> {
-        stack.validate()?;
-        if self == Baseline::LayeredDisc {
-            return layered_disc(stack, camera, LAYERED_PLANES);
-        }
-        let (aif, disparity) = flatten(stack, camera)?;
-        match self {
-            Baseline::NaiveGather => naive_gather(&aif, &disparity, camera),
-            Baseline::NaiveScatter => naive_scatter(&aif, &disparity, camera),
-            Baseline::GaussPsf => gauss_psf(&aif, &disparity, camera),
-            Baseline::LayeredDisc => unreachable!(),
-        }
-    }
-}
-
-impl std::str::FromStr for Baseline {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<Self> {
-        Baseline::ALL
-            .into_iter()
-            .find(|b| b.name() == s)
-            .ok_or_else(|| {
-                Error::param(
-                    "methods",
-                    format!("unknown baseline '{s}' (gather, scatter, layered, gausspsf)"),
-                )
-            })
-    }
-}
-
-/// The image + disparity pair a layer stack shows the camera: colour composited front to
-/// back with `over` in linear light (the camera's gamma and offset), disparity of the
-/// frontmost layer whose alpha is at least 0.5 (the last layer where none is). A
-/// single-layer stack returns its colour and disparity unchanged.
-pub fn flatten<T: Real>(stack: &LayerStack<T>, camera: &Camera) -> Result<(Image<T>, Image<T>)> {
-    stack.validate()?;
-    camera.validate()?;
-    if stack.layers.len() == 1 {
-        let l = &stack.layers[0];
-        return Ok((l.rgb_encoded.clone(), l.disparity.clone()));
-    }
-    let (w, h) = (stack.width, stack.height);
-    let (g, off) = (camera.gamma, camera.offset);
-    let mut rgb = Image::new(w, h, 3);
-    let mut disp = Image::new(w, h, 1);
-    for i in 0..w * h {
-        let mut acc = [0.0f64; 3];
-        let mut t = 1.0f64;
-        let mut d = None;
-        for l in &stack.layers {
-            let a = l.alpha.data[i].f64();
-            for c in 0..3 {
-                acc[c] += t * a * model::linearize(l.rgb_encoded.data[3 * i + c].f64(), g, off);
-            }
-            t *= 1.0 - a;
-            if d.is_none() && a >= 0.5 {
-                d = Some(l.disparity.data[i]);
-            }
-        }
-        for c in 0..3 {
-            rgb.data[3 * i + c] = T::c(model::encode(acc[c].max(0.0), g, off).max(0.0));
-        }
-        disp.data[i] = d.unwrap_or(stack.layers.last().unwrap().disparity.data[i]);
-    }
-    Ok((rgb, disp))
-}
 
 /// The CoC radius of a pixel: `max(K |disp - f|, MIN_DISC_RADIUS_PX)` pixels.
 pub fn coc_radius_px(camera: &Camera, disparity: f64) -> f64 {
@@ -542,34 +400,10 @@ pub fn layered_disc<T: Real>(
     Ok(encode_output(&acc, w, h, camera))
 }
 
-/// The GaussPSF baseline: [`crate::dfd::layers`]'s [`RenderLayer::GaussPsf`] with the
-/// camera's `K`, focus, gamma and offset, and a window wide enough for three standard
-/// deviations of the largest Gaussian (capped at [`MAX_WINDOW_SIZE`]), so no blur is
-/// clipped.
-pub fn gauss_psf<T: Real>(
-    aif: &Image<T>,
-    disparity: &Image<T>,
-    camera: &Camera,
-) -> Result<Image<T>> {
-    camera.validate()?;
-    let max_d = disparity
-        .data
-        .iter()
-        .map(|d| (d.f64() - camera.focus_disparity).abs())
-        .fold(0.0, f64::max);
-    let half = 0.5 * camera.blur_k * max_d;
-    let sigma = (half * half + 0.25).sqrt();
-    let radius = ((3.0 * sigma).ceil() as usize).clamp(1, MAX_WINDOW_SIZE / 2);
-    let mut settings = RenderSettings::paper(camera.focus_disparity);
-    settings.camera = camera.clone();
-    settings.camera.highlight = false;
-    settings.camera.window = Window::from_size(2 * radius + 1)?;
-    render_layer(RenderLayer::GaussPsf, aif, disparity, &settings)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::baselines::Baseline;
 
     #[test]
     fn disc_area_is_close_to_pi_r2_and_continuous() {

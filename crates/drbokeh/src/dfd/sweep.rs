@@ -1,0 +1,102 @@
+//! The plane-sweep initialisation ([`super::Init::Sweep`]).
+
+use super::maps::to_image;
+use super::{render_layer_on, DfdOptions};
+use crate::image::Image;
+use crate::{Real, Result};
+
+/// Plane sweep at one scale: for each of `n` constant disparities, the absolute difference
+/// between its render and the target, averaged over a `(2 radius + 1)^2` window with
+/// edge-aware weights (pixels of a similar colour in the all-in-focus image count more:
+/// [`guided_mean`]; left-out pixels count zero); each pixel takes the disparity with the
+/// smallest difference, refined between the sampled disparities by a parabola through the
+/// smallest difference and its two neighbours.
+pub(super) fn sweep<T: Real>(
+    options: &DfdOptions,
+    settings: &crate::RenderSettings,
+    aif: &Image<T>,
+    target: &Image<T>,
+    excluded: &[bool],
+    n: usize,
+    radius: usize,
+) -> Result<Vec<f64>> {
+    let (w, h) = (aif.width, aif.height);
+    let guide: Vec<[f64; 3]> = aif
+        .data
+        .chunks_exact(3)
+        .map(|p| [p[0].f64(), p[1].f64(), p[2].f64()])
+        .collect();
+    let mut costs: Vec<Vec<f64>> = Vec::with_capacity(n);
+    for k in 0..n {
+        let d = k as f64 / (n - 1) as f64;
+        let disp: Image<T> = to_image(&vec![d; w * h], w, h, 1);
+        let render = render_layer_on(options.layer, options.engine, aif, &disp, settings)?;
+        let err: Vec<f64> = (0..w * h)
+            .map(|i| {
+                if excluded[i] {
+                    return 0.0;
+                }
+                (0..3)
+                    .map(|c| {
+                        (render.data[3 * i + c].f64().clamp(0.0, 1.0)
+                            - target.data[3 * i + c].f64())
+                        .abs()
+                    })
+                    .sum::<f64>()
+            })
+            .collect();
+        costs.push(guided_mean(&err, &guide, w, h, radius));
+    }
+    let step = 1.0 / (n - 1) as f64;
+    Ok((0..w * h)
+        .map(|i| {
+            let (mut best, mut bk) = (f64::INFINITY, 0);
+            for (k, c) in costs.iter().enumerate() {
+                if c[i] < best {
+                    best = c[i];
+                    bk = k;
+                }
+            }
+            let mut d = bk as f64 * step;
+            if bk > 0 && bk + 1 < n {
+                let (a, b, c) = (costs[bk - 1][i], costs[bk][i], costs[bk + 1][i]);
+                let curv = a - 2.0 * b + c;
+                if curv > 1e-12 {
+                    d += 0.5 * (a - c) / curv * step;
+                }
+            }
+            d.clamp(0.0, 1.0)
+        })
+        .collect())
+}
+
+/// Colour distance (encoded, RMS over channels) at which [`guided_mean`]'s weight is
+/// `exp(-1/2)`.
+const SWEEP_GUIDE_SIGMA: f64 = 0.1;
+
+/// Edge-aware mean of a one-channel map over a `(2r+1)^2` window: weight
+/// `exp(-|I(x) - I(y)|^2 / (2 sigma^2))` by the guide colours (a joint bilateral box), so
+/// a window straddling an object boundary averages mostly the pixel's own side.
+fn guided_mean(data: &[f64], guide: &[[f64; 3]], w: usize, h: usize, r: usize) -> Vec<f64> {
+    use rayon::prelude::*;
+    let inv = 1.0 / (2.0 * 3.0 * SWEEP_GUIDE_SIGMA * SWEEP_GUIDE_SIGMA);
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let g = guide[i];
+            let (mut s, mut n) = (0.0, 0.0);
+            for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                    let j = yy * w + xx;
+                    let q = guide[j];
+                    let d2 = (g[0] - q[0]).powi(2) + (g[1] - q[1]).powi(2) + (g[2] - q[2]).powi(2);
+                    let wt = (-d2 * inv).exp();
+                    s += wt * data[j];
+                    n += wt;
+                }
+            }
+            s / n
+        })
+        .collect()
+}
