@@ -470,7 +470,14 @@ fn nits_usage_errors_exit_2_with_the_option_named() {
         &["--demo-size", "200x100 x 3 layer(s)", "budget 0.05"],
     );
     // dfd-eval names its own option.
-    let o = run(&["dfd-eval", "--layers", "foo", "--out", p(&d.path("r"))]);
+    let o = run(&[
+        "dfd-eval",
+        "--synthetic",
+        "--layers",
+        "foo",
+        "--out",
+        p(&d.path("r")),
+    ]);
     expect(&o, 2, &["--layers", "unknown layer 'foo'"]);
     // bench --only with no match: refused at once.
     let t = Instant::now();

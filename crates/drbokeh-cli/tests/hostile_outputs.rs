@@ -290,7 +290,7 @@ fn case5_6_output_problems_are_found_before_any_work() {
 }
 
 #[test]
-fn case5_dfd_writes_all_three_outputs_or_none() {
+fn case5_dfd_writes_all_its_outputs_or_none() {
     let d = Dir::new();
     let aif = d.path("aif.png");
     write_png(&aif, 24, 20);
@@ -309,8 +309,8 @@ fn case5_dfd_writes_all_three_outputs_or_none() {
         "2",
         "--iterations",
         "2",
-        "--scales",
-        "1",
+        "--coarse-scales",
+        "0",
         "-q",
         "-o",
         p(&out),
@@ -321,6 +321,7 @@ fn case5_dfd_writes_all_three_outputs_or_none() {
         [
             "aif.png",
             "blurred.png",
+            "d.confidence.png",
             "d.log.json",
             "d.png",
             "d.preview.png"

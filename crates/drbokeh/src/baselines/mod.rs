@@ -117,7 +117,7 @@ impl std::str::FromStr for Baseline {
             .find(|b| b.name() == s)
             .ok_or_else(|| {
                 Error::param(
-                    "--methods",
+                    "methods",
                     format!("unknown baseline '{s}' (gather, scatter, layered, gausspsf)"),
                 )
             })

@@ -91,7 +91,7 @@ impl LossCombo {
             .map(|k| {
                 Self::ALL.into_iter().find(|c| c.key() == k).ok_or_else(|| {
                     Error::param(
-                        "--losses",
+                        "losses",
                         format!("unknown loss combination '{k}' (l1g, ssim, hssim or all)"),
                     )
                 })
@@ -158,7 +158,7 @@ impl DfdLayer {
                     .find(|l| l.name().strip_prefix("drbokeh-").unwrap_or(l.name()) == k)
                     .ok_or_else(|| {
                         Error::param(
-                            "--layers",
+                            "layers",
                             format!(
                                 "unknown layer '{k}' (physical, paper, gausspsf, aperture or all)"
                             ),

@@ -52,7 +52,7 @@ impl std::str::FromStr for RenderLayer {
             .find(|l| l.name() == s)
             .ok_or_else(|| {
                 Error::param(
-                    "--layer",
+                    "layer",
                     format!("unknown layer '{s}' (drbokeh, gausspsf, aperture)"),
                 )
             })

@@ -97,14 +97,14 @@ impl LossWeights {
                 }
                 _ => {
                     return Err(Error::param(
-                        "--losses",
+                        "losses",
                         format!("unknown loss term '{t}' (use l1, smooth, ssim, hssim)"),
                     ))
                 }
             }
         }
         if w.l1 == 0.0 && w.smoothness == 0.0 && w.hssim == 0.0 {
-            return Err(Error::param("--losses", "no loss term selected"));
+            return Err(Error::param("losses", "no loss term selected"));
         }
         Ok((
             w,
@@ -144,7 +144,7 @@ impl std::str::FromStr for Parameterisation {
             "clamped" => Ok(Parameterisation::Clamped),
             "sigmoid" => Ok(Parameterisation::Sigmoid),
             _ => Err(Error::param(
-                "--param",
+                "param",
                 format!("unknown parameterisation '{s}' (sigmoid, clamped)"),
             )),
         }
@@ -171,7 +171,7 @@ impl std::str::FromStr for Optimiser {
             "adam" => Ok(Optimiser::Adam),
             "shared-adam" => Ok(Optimiser::SharedAdam),
             _ => Err(Error::param(
-                "--optimiser",
+                "optimiser",
                 format!("unknown optimiser '{s}' (shared-adam, adam)"),
             )),
         }
@@ -209,7 +209,7 @@ impl std::str::FromStr for Highlights {
             "mask" => Ok(Highlights::Mask),
             "model" => Ok(Highlights::Model),
             _ => Err(Error::param(
-                "--highlights",
+                "highlights",
                 format!("unknown highlight handling '{s}' (model, mask, ignore)"),
             )),
         }
@@ -375,38 +375,38 @@ impl DfdOptions {
         self.settings.validate()?;
         let s = &self.schedule;
         if s.coarse_scales > 8 {
-            return Err(Error::param("--coarse-scales", "must be between 0 and 8"));
+            return Err(Error::param("coarse_scales", "must be between 0 and 8"));
         }
         if s.finest_scale.is_some_and(|f| f > 8) {
-            return Err(Error::param("--finest-scale", "must be between 0 and 8"));
+            return Err(Error::param("finest_scale", "must be between 0 and 8"));
         }
         if s.iterations == 0 || s.iterations > 100_000 {
-            return Err(Error::param("--iterations", "must be between 1 and 100000"));
+            return Err(Error::param("iterations", "must be between 1 and 100000"));
         }
         if s.fine_iterations == 0 || s.fine_iterations > 100_000 {
             return Err(Error::param(
-                "--fine-iterations",
+                "fine_iterations",
                 "must be between 1 and 100000",
             ));
         }
         if !(s.learning_rate > 0.0 && s.learning_rate.is_finite() && s.learning_rate <= 100.0) {
-            return Err(Error::param("--lr", "learning rate must be in (0, 100]"));
+            return Err(Error::param("lr", "learning rate must be in (0, 100]"));
         }
         if !(s.learning_rate_decay > 0.0 && s.learning_rate_decay <= 1.0) {
-            return Err(Error::param("--lr-decay", "must be in (0, 1]"));
+            return Err(Error::param("lr_decay", "must be in (0, 1]"));
         }
         if !(s.min_improvement >= 0.0 && s.min_improvement < 1.0) {
-            return Err(Error::param("--min-improvement", "must be in [0, 1)"));
+            return Err(Error::param("min_improvement", "must be in [0, 1)"));
         }
         if !(self.edge_sensitivity >= 0.0 && self.edge_sensitivity <= 1000.0) {
-            return Err(Error::param("--edge-sensitivity", "must be in [0, 1000]"));
+            return Err(Error::param("edge_sensitivity", "must be in [0, 1000]"));
         }
         if let Some(m) = self.median {
             if !(m.radius_blur_fraction > 0.0 && m.radius_blur_fraction <= 10.0) {
-                return Err(Error::param("--median-radius", "must be in (0, 10]"));
+                return Err(Error::param("median_radius", "must be in (0, 10]"));
             }
             if !(m.sigma > 0.0 && m.sigma <= 10.0) {
-                return Err(Error::param("--median-sigma", "must be in (0, 10]"));
+                return Err(Error::param("median_sigma", "must be in (0, 10]"));
             }
         }
         for (name, w) in [
@@ -416,18 +416,18 @@ impl DfdOptions {
         ] {
             if !(w >= 0.0 && w.is_finite()) {
                 return Err(Error::param(
-                    "--losses",
+                    "losses",
                     format!("weight of {name} must be finite and >= 0, got {w}"),
                 ));
             }
         }
         match self.init {
             Init::Constant(v) if !(0.0..=1.0).contains(&v) => Err(Error::param(
-                "--init",
+                "init",
                 format!("initial disparity must be in [0, 1], got {v}"),
             )),
             Init::Sweep(n) if !(2..=64).contains(&n) => Err(Error::param(
-                "--init",
+                "init",
                 format!("a sweep needs 2 to 64 disparities, got {n}"),
             )),
             _ => Ok(()),

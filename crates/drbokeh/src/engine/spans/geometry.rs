@@ -133,8 +133,9 @@ impl Shape {
         }
     }
 
-    /// The columns `vx` (an integer interval) with `gauge(sign * vx, sign * vy) <= c` on
-    /// row `vy`, or `None`. `sign = 1` for tap offsets `y - x`, `-1` for receiver offsets
+    /// The columns `vx` (an integer interval) with `gauge(sign * vx, sign * vy) <= c` (up to
+    /// [`GAUGE_TOLERANCE`], so that offsets exactly on a polygon's edge are inside whatever
+    /// the rounding of `b / a`) on row `vy`, or `None`. `sign = 1` for tap offsets `y - x`, `-1` for receiver offsets
     /// `x - y`. Monotone in `c`: a smaller bound gives a sub-interval.
     #[inline]
     pub fn interval(&self, c: f64, vy: isize, sign: f64) -> Option<(isize, isize)> {
@@ -154,7 +155,7 @@ impl Shape {
             Shape::Polygon { normals, apothem } => {
                 // For all k: nx (s vx) + ny (s vy) <= c apothem.
                 let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-                let cc = c * apothem;
+                let cc = (c + GAUGE_TOLERANCE) * apothem;
                 for &(nx, ny) in normals {
                     let a = sign * nx;
                     let b = cc - sign * ny * vy;
@@ -172,6 +173,11 @@ impl Shape {
         }
     }
 }
+
+/// Slack of [`Shape::interval`]'s polygon test: an offset whose gauge exceeds the bound by
+/// less than this counts as inside (a tie decided by rounding otherwise; either way the
+/// offset's exact weight is within the interior's defect bound of 1).
+pub const GAUGE_TOLERANCE: f64 = 1e-9;
 
 /// The largest integer `h` with `h^2 <= q` (`q >= 0`), found from a guess (exact: the
 /// circle's row half-width, [`Shape::interval`]; a neighbouring source's is usually right).
@@ -384,7 +390,9 @@ mod tests {
                 for c in [0.0, 0.4, 1.0, 2.5, 7.3, 19.9] {
                     for vy in -22isize..=22 {
                         let inside: Vec<isize> = (-40isize..=40)
-                            .filter(|&vx| a.gauge(sign * vx as f64, sign * vy as f64) <= c + 1e-9)
+                            .filter(|&vx| {
+                                a.gauge(sign * vx as f64, sign * vy as f64) <= c + GAUGE_TOLERANCE
+                            })
                             .collect();
                         let got = shape.interval(c, vy, sign);
                         match got {
