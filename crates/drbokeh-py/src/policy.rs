@@ -1,6 +1,6 @@
 //! From Python arguments to the library's entry point, `drbokeh::scene`: the keyword
 //! arguments become a [`View`] ([`ViewArgs::view`]), the engine name is resolved by
-//! [`Engine::parse_or_auto`] (`"auto"`: fast in float32, threaded in float64, as `--f64`),
+//! [`Engine::parse_or_auto`] (`"auto"`: spans or fast taps in float32, threaded in float64, as `--f64`),
 //! and [`resolve`] hands the scene to [`scene::resolve`], which decides the focus (a value,
 //! a pixel, or the centre pixel), the automatic window and a photo's layers. This is the
 //! path `drbokeh render` takes, so Python and the CLI render the same stack with the same

@@ -81,8 +81,9 @@ pub fn stack_args<'py>(
 ///         except for the fast engine; a clipped blur issues a DrBokehWarning).
 ///     gamma, offset: the display transfer, linear = (encoded + offset) ** gamma.
 ///     highlight: boost bright, defocused highlights.
-///     engine: "auto" (fast in float32, the exact threaded engine in float64, as
-///         --f64), "fast", "threaded" or "reference".
+///     engine: "auto" (in float32 spans or the fast engine's taps, whichever is
+///         cheaper per band and layer; the exact threaded engine in float64, as --f64),
+///         "spans", "fast", "threaded" or "reference".
 ///     threads: worker threads (default: all cores); the output never depends on it.
 ///
 /// Arrays may be float32 or float64, contiguous or not; each is copied once.
@@ -281,7 +282,8 @@ fn gradients_to_py<'py, T: Float>(
 /// Renders like `render` and records what the backward pass needs: returns
 /// `(image, Tape)`. The image equals `render`'s with the same arguments bit for bit
 /// (`engine="reference"` records on the threaded schedule, whose output is the
-/// reference's). `engine="auto"`: the fast engine's adjoint in float32 (within 1e-5 of
+/// reference's), except that `"spans"` and float32 `"auto"` record on the fast engine's
+/// schedule: their image is `engine="fast"`'s (within 1e-5 of theirs). `engine="auto"`: the fast engine's adjoint in float32 (within 1e-5 of
 /// the exact gradient's largest value), the exact threaded adjoint in float64.
 #[pyfunction]
 #[pyo3(signature = (rgb, alpha, disparity, *, focus, blur, preset="physical", aperture=None, window=None, gamma=2.2, offset=0.0, highlight=false, engine="auto", threads=None))]

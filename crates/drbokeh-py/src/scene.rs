@@ -158,8 +158,13 @@ fn prepare_image<T: Float>(
     workers: &Workers,
 ) -> PyResult<Prepared<T>> {
     let engine = c.engine(T::PRECISION)?;
-    let view = c.view(aperture)?;
+    let mut view = c.view(aperture)?;
     let tone = linear.then(|| view.tone());
+    if linear {
+        // Linear light keeps its highlights' energy: no recovery or boost by default, as the
+        // CLI does for an EXR image (docs/highlights.md).
+        view.photo_highlights = drbokeh::highlight::PhotoHighlights::Off;
+    }
     let (rgb_encoded, disparity, matte) = photo::<T>(image, disparity, matte, tone.as_ref())?;
     let layering = if single_layer {
         Layering::SingleLayer

@@ -32,9 +32,11 @@ def test_dtype_follows_the_inputs():
 def test_auto_engine_is_fast_in_f32_and_exact_in_f64():
     s32 = random_stack(2, 2, 15, 12, dtype=np.float32)
     s64 = {k: v.astype(np.float64) for k, v in s32.items()}
-    np.testing.assert_array_equal(
-        drbokeh.render(**s32, **CAM), drbokeh.render(**s32, **CAM, engine="fast")
-    )
+    # In float32, auto picks spans or the fast engine's taps per band and layer: within the
+    # span engine's tested bound of the fast engine.
+    auto32 = drbokeh.render(**s32, **CAM)
+    np.testing.assert_array_equal(auto32, drbokeh.render(**s32, **CAM, engine="auto"))
+    assert np.abs(auto32 - drbokeh.render(**s32, **CAM, engine="fast")).max() < 1e-5
     exact = drbokeh.render(**s64, **CAM, engine="reference")
     np.testing.assert_array_equal(drbokeh.render(**s64, **CAM), exact)
     np.testing.assert_array_equal(drbokeh.render(**s64, **CAM, engine="threaded"), exact)
@@ -111,7 +113,8 @@ def test_vjp_is_the_tape_backward():
 
 
 def test_the_gil_is_released_while_rendering():
-    s = drbokeh.demo(160, 120)
+    # Big enough that the threaded engine takes well over 0.2 s on one thread.
+    s = drbokeh.demo(480, 360)
     count = [0]
     stop = threading.Event()
 
@@ -272,7 +275,7 @@ def test_bad_files_raise_oserror(tmp_path):
     with pytest.raises(ValueError, match="use a .npz output name"):
         drbokeh.save_stack(tmp_path / "stack.npy", **GOOD)
     assert not (tmp_path / "stack.npy").exists()
-    with pytest.raises(OSError, match="output directory does not exist"):
+    with pytest.raises(OSError, match="output directory .* does not exist"):
         drbokeh.save_stack(tmp_path / "no" / "such" / "stack.npz", **GOOD)
     with pytest.raises(ValueError, match="dtype must be float32 or float64"):
         drbokeh.load_stack(tmp_path / "partial.npz", dtype="int32")

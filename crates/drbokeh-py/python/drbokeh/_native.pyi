@@ -60,7 +60,7 @@ def render(
     gamma: float = 2.2,
     offset: float = 0.0,
     highlight: bool = False,
-    engine: Literal["auto", "fast", "threaded", "reference"] = "auto",
+    engine: Literal["auto", "spans", "fast", "threaded", "reference"] = "auto",
     threads: Optional[int] = None,
 ) -> np.ndarray:
     """Renders a layer stack (``drbokeh render --layers``).
@@ -79,7 +79,8 @@ def render(
             :class:`DrBokehWarning`).
         gamma, offset: the display transfer ``linear = (encoded + offset) ** gamma``.
         highlight: boost bright, defocused highlights.
-        engine: ``"auto"`` is ``"fast"`` in float32 and ``"threaded"`` (exact) in float64.
+        engine: ``"auto"`` is spans or the fast engine's taps (whichever is cheaper per band
+            and layer) in float32 and ``"threaded"`` (exact) in float64.
         threads: worker threads (default: all cores); the output never depends on it.
 
     Returns:
@@ -106,11 +107,12 @@ def render_with_tape(
     gamma: float = 2.2,
     offset: float = 0.0,
     highlight: bool = False,
-    engine: Literal["auto", "fast", "threaded", "reference"] = "auto",
+    engine: Literal["auto", "spans", "fast", "threaded", "reference"] = "auto",
     threads: Optional[int] = None,
 ) -> Tuple[np.ndarray, Tape]:
     """:func:`render`, also recording a :class:`Tape` for the backward pass. The image is
-    :func:`render`'s, bit for bit. ``engine="auto"``: the fast engine's adjoint in float32
+    :func:`render`'s, bit for bit (``"spans"`` and float32 ``"auto"`` record on the fast
+    engine's schedule: their image is ``engine="fast"``'s). ``engine="auto"``: the fast engine's adjoint in float32
     (within 1e-5 of the exact gradient's largest value), the exact one in float64."""
 
 def vjp(
@@ -127,7 +129,7 @@ def vjp(
     gamma: float = 2.2,
     offset: float = 0.0,
     highlight: bool = False,
-    engine: Literal["auto", "fast", "threaded", "reference"] = "auto",
+    engine: Literal["auto", "spans", "fast", "threaded", "reference"] = "auto",
     threads: Optional[int] = None,
     rescale_small_gradients: bool = False,
 ) -> Dict[str, np.ndarray]:
@@ -153,7 +155,7 @@ def render_image(
     gamma: float = 2.2,
     offset: float = 0.0,
     highlight: bool = False,
-    engine: Literal["auto", "fast", "threaded", "reference"] = "auto",
+    engine: Literal["auto", "spans", "fast", "threaded", "reference"] = "auto",
     threads: Optional[int] = None,
 ) -> np.ndarray:
     """Renders a photo as ``drbokeh render --image`` does.
