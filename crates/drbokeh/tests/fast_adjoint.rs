@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{random_stack, settings, Rng};
+use common::{random_stack, settings, tape_bits, Rng};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
@@ -244,23 +244,7 @@ fn fast_adjoint_is_identical_for_any_thread_count() {
                 .num_threads(n)
                 .build()
                 .unwrap()
-                .install(|| {
-                    let (out, tape) =
-                        render_with_tape_on(&stack, &s, Engine::Fast, &NoProgress).unwrap();
-                    let r = tape.backward(&g, &NoProgress).unwrap();
-                    let mut bytes: Vec<u32> = out.data.iter().map(|v| v.to_bits()).collect();
-                    for l in &r.layers {
-                        bytes.extend(
-                            l.rgb
-                                .data
-                                .iter()
-                                .chain(&l.alpha.data)
-                                .chain(&l.disparity.data)
-                                .map(|v| v.to_bits()),
-                        );
-                    }
-                    (bytes, r.blur_k.to_bits(), r.focus.to_bits())
-                })
+                .install(|| tape_bits(&stack, &s, Engine::Fast, &g))
         };
         let one = run(1);
         for n in [2, 3] {

@@ -5,11 +5,11 @@
 
 mod common;
 
-use common::{random_stack, settings};
+use common::{random_stack, settings, tape_bits};
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
-    render, render_with_stats, render_with_tape_on, Aperture, Engine, Image, Layer, LayerStack,
-    NoProgress, RenderSettings,
+    render, render_with_stats, Aperture, Engine, Image, Layer, LayerStack, NoProgress,
+    RenderSettings,
 };
 
 /// `(max, mean)` absolute difference of two display-encoded images.
@@ -226,22 +226,7 @@ fn spans_tape_is_the_fast_adjoint() {
             .collect(),
     )
     .unwrap();
-    let run = |engine| {
-        let (out, tape) = render_with_tape_on(&stack, &s, engine, &NoProgress).unwrap();
-        let r = tape.backward(&g, &NoProgress).unwrap();
-        let mut bits: Vec<u32> = out.data.iter().map(|v| v.to_bits()).collect();
-        for l in &r.layers {
-            bits.extend(
-                l.rgb
-                    .data
-                    .iter()
-                    .chain(&l.alpha.data)
-                    .chain(&l.disparity.data)
-                    .map(|v| v.to_bits()),
-            );
-        }
-        (bits, r.blur_k.to_bits(), r.focus.to_bits())
-    };
+    let run = |engine| tape_bits(&stack, &s, engine, &g);
     let fast = run(Engine::Fast);
     assert!(fast == run(Engine::Spans) && fast == run(Engine::Auto));
 }

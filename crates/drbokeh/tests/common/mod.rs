@@ -1,7 +1,10 @@
 //! Shared test helpers: a deterministic RNG and random layer stacks.
 #![allow(dead_code)]
 
-use drbokeh::{Aperture, Image, Layer, LayerStack, Real, RenderSettings, Window};
+use drbokeh::{
+    render_with_tape_on, Aperture, Engine, Image, Layer, LayerStack, NoProgress, Real,
+    RenderSettings, Window,
+};
 
 /// SplitMix64: tiny, deterministic, good enough for test data.
 pub struct Rng(pub u64);
@@ -70,4 +73,29 @@ pub fn settings(focus: f64, k: f64, window: usize, aperture: Aperture) -> Render
     s.camera.window = Window::from_size(window).unwrap();
     s.aperture = aperture;
     s
+}
+
+/// Everything a tape yields, as bits: the forward output, then every layer's colour, alpha
+/// and disparity gradient, then the blur and focus gradients (for exact comparisons of
+/// schedules and thread counts).
+pub fn tape_bits(
+    stack: &LayerStack<f32>,
+    s: &RenderSettings,
+    engine: Engine,
+    grad_output: &Image<f32>,
+) -> (Vec<u32>, u64, u64) {
+    let (out, tape) = render_with_tape_on(stack, s, engine, &NoProgress).unwrap();
+    let r = tape.backward(grad_output, &NoProgress).unwrap();
+    let mut bits: Vec<u32> = out.data.iter().map(|v| v.to_bits()).collect();
+    for l in &r.layers {
+        bits.extend(
+            l.rgb
+                .data
+                .iter()
+                .chain(&l.alpha.data)
+                .chain(&l.disparity.data)
+                .map(|v| v.to_bits()),
+        );
+    }
+    (bits, r.blur_k.to_bits(), r.focus.to_bits())
 }
