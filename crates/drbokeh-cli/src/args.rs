@@ -112,12 +112,8 @@ pub struct CameraArgs {
     #[arg(long, default_value = "circle", value_name = "SHAPE")]
     pub aperture: String,
 
-    /// Model preset. physical (default): the paper's equation with layer coverage averaged
-    /// over the receiver's soft aperture disc (radius K|d|, its circle of confusion) and a
-    /// sharp scatter step centred on the circle of confusion (in-focus pixels stay sharp);
-    /// +4.4 to +4.6 dB PSNR over paper, better on all 32 scenes of two ray-traced
-    /// benchmark sets (docs/physical.md). paper: the published Dr.Bokeh model, exactly.
-    #[arg(long, default_value = "physical", value_name = "NAME")]
+    // Help generated from the library's list of presets (crate::names).
+    #[arg(long, default_value = "physical", value_name = "NAME", help = crate::names::preset_help())]
     pub preset: String,
 }
 
@@ -132,13 +128,7 @@ pub struct ExecArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
 
-    /// Execution engine. auto (default): in f32, per band and layer the span engine or the
-    /// fast engine's taps, whichever is predicted cheaper; threaded with --f64 (bit-exact,
-    /// for checks). spans: O(r) row spans (within ~2e-5 relative of fast). fast: skips taps
-    /// that cannot contribute (agrees with the reference to ~1e-6 in linear light) and has
-    /// no practical window limit. threaded: every window tap, all
-    /// cores. reference: plain loops, the oracle (slow).
-    #[arg(long, default_value = "auto", value_name = "ENGINE")]
+    #[arg(long, default_value = "auto", value_name = "ENGINE", help = crate::names::engine_help())]
     pub engine: String,
 
     /// No progress bar or notes on stderr.
@@ -310,8 +300,8 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "highlights" => "--highlights",
         "init" => "--init",
         "iterations" => "--iterations",
-        "layer" => "--layer",
-        "layers" => "--layers",
+        "layer" => "--method",
+        "layers" => "--methods",
         "losses" => "--losses",
         "lr" => "--lr",
         "lr_decay" => "--lr-decay",

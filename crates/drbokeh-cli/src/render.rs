@@ -9,13 +9,22 @@ use drbokeh::{Engine, Real};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Render lens blur.
+/// Render lens blur from a layer stack, an image + disparity map, or the built-in demo.
+///
+/// The scene is a layer stack (--layers), a photo with its disparity or depth map
+/// (--image with --disparity or --depth; decomposed into depth layers, or the paper's two
+/// layers with an --alpha matte), or the built-in demo (--demo). Focus with --focus (a
+/// disparity) or --focus-at (tap a pixel); --blur sets the blur strength.
 ///
 /// Examples:
-///   drbokeh render --demo --output bokeh.png
-///   drbokeh render --image photo.jpg --disparity disp.png --focus-at 320,200 --blur 20 --output out.png
-///   drbokeh render --image photo.jpg --depth depth.exr --alpha matte.png --aperture hexagon --output out.exr
-///   drbokeh render --layers stack.npz --preset paper --focus 0.4 --blur 30 --window 71 --output out.npy
+///   drbokeh render --demo -o bokeh.png
+///   drbokeh render --image examples/photo.png \
+///       --disparity examples/photo.disp.png --focus-at 300,150 -o out.png
+///   drbokeh render --image examples/photo.png \
+///       --disparity examples/photo.disp.png --aperture hexagon --blur 40 \
+///       -o out.exr
+///   drbokeh render --layers stack.npz --preset paper --focus 0.4 --blur 30 \
+///       --window 71 --f64 -o out.npy
 ///
 /// Output format follows the extension: .png (8-bit, or --bit-depth 16), .tif, .jpg, .exr
 /// (linear float) or .npy (float32 (H,W,3) display-encoded values, float64 with --f64;
