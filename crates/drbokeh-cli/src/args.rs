@@ -297,7 +297,7 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "edge_sensitivity" => "--edge-sensitivity",
         "fine_iterations" => "--fine-iterations",
         "finest_scale" => "--finest-scale",
-        "highlights" => "--highlights",
+        "highlights" => "--clipped",
         "init" => "--init",
         "iterations" => "--iterations",
         "layer" => "--method",

@@ -49,8 +49,9 @@ pub struct OptimiserArgs {
     pub optimiser: String,
     /// Pixels clipped (white) in the all-in-focus image: model (optimise their true
     /// brightness with the disparity), mask (leave every pixel they can reach out of the
-    /// loss) or ignore.
-    #[arg(long, default_value = "model", value_name = "MODE")]
+    /// loss) or ignore. (Formerly --highlights, kept as an alias: render's --highlight is
+    /// another thing.)
+    #[arg(long = "clipped", alias = "highlights", default_value = "model", value_name = "MODE")]
     pub highlights: String,
     /// Initial disparity: sweepN (default sweep9: render the pair at N constant
     /// disparities, keep per pixel the one that matches best over an edge-aware window),

@@ -24,7 +24,8 @@ fn command_lines(text: &str) -> Vec<String> {
     let mut out = Vec::new();
     let mut pending: Option<String> = None;
     for line in text.lines() {
-        let t = line.trim();
+        // A shell comment ends the command.
+        let t = line.split(" #").next().unwrap_or("").trim();
         if let Some(mut p) = pending.take() {
             p.push(' ');
             p.push_str(t.trim_end_matches('\\').trim());

@@ -41,7 +41,7 @@ fn dfd_writes_disparity_log_and_preview() {
         "0",
         "--finest-scale",
         "0",
-        "--layer",
+        "--method",
         "gausspsf",
         "--losses",
         "l1,smooth",
@@ -98,7 +98,7 @@ fn dfd_rejects_bad_input() {
         "{}",
         stderr(&o)
     );
-    let o = run(&["--defocused", p(&a), "--layer", "nope", "--output", p(&out)]);
+    let o = run(&["--defocused", p(&a), "--method", "nope", "--output", p(&out)]);
     assert!(stderr(&o).contains("unknown layer"), "{}", stderr(&o));
     let o = run(&[
         "--defocused",

@@ -237,7 +237,7 @@ fn case2_scene_limits_are_checked_before_generating_anything() {
         let path = d.path(name);
         std::fs::write(&path, text).unwrap();
         let t = Instant::now();
-        let o = run(&["trace", p(&path), "--out", p(&d.path("out")), "-q"]);
+        let o = run(&["trace", p(&path), "--output", p(&d.path("out")), "-q"]);
         expect(&o, 1, words);
         assert!(
             t.elapsed() < Duration::from_secs(10),
@@ -473,12 +473,12 @@ fn nits_usage_errors_exit_2_with_the_option_named() {
     let o = run(&[
         "dfd-eval",
         "--synthetic",
-        "--layers",
+        "--methods",
         "foo",
-        "--out",
+        "--output",
         p(&d.path("r")),
     ]);
-    expect(&o, 2, &["--layers", "unknown layer 'foo'"]);
+    expect(&o, 2, &["--methods", "unknown layer 'foo'"]);
     // bench --only with no match: refused at once.
     let t = Instant::now();
     let o = run(&["bench", "--only", "no-such-workload"]);
@@ -556,7 +556,7 @@ fn nits_messages_name_the_file_and_the_real_culprit() {
         ),
     )
     .unwrap();
-    let o = run(&["trace", p(&scene), "--out", p(&d.path("t")), "-q"]);
+    let o = run(&["trace", p(&scene), "--output", p(&d.path("t")), "-q"]);
     expect(&o, 1, &["tex.png", "gain", "overflow"]);
     assert!(!out.exists() && !d.path("t").exists());
 }

@@ -358,7 +358,7 @@ fn case7_sigint_removes_temporaries_and_stale_ones_are_swept() {
 
     // SIGINT while eval is writing its report tree: the temporaries go, exit 130.
     let report = d.path("report");
-    let mut child = command(&["eval", "--benchmark", p(&bench), "--out", p(&report), "-q"])
+    let mut child = command(&["eval", "--benchmark", p(&bench), "--output", p(&report), "-q"])
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -390,11 +390,11 @@ fn case7_failures_leave_nothing_behind() {
     std::fs::write(&scene, scene_json(2, 16, false)).unwrap();
     let file = d.path("f.txt");
     std::fs::write(&file, b"keep").unwrap();
-    let o = run(&["trace", p(&scene), "--out", p(&file), "--force", "-q"]);
+    let o = run(&["trace", p(&scene), "--output", p(&file), "--force", "-q"]);
     expect(&o, 1, &["f.txt", "exists and is not a directory"]);
     assert_eq!(std::fs::read(&file).unwrap(), b"keep");
     // trace --force onto the directory holding the scene file: refused.
-    let o = run(&["trace", p(&scene), "--out", p(d.0.path()), "--force", "-q"]);
+    let o = run(&["trace", p(&scene), "--output", p(d.0.path()), "--force", "-q"]);
     expect(&o, 1, &["would replace the input", "scene.json"]);
     assert_eq!(d.names(), ["f.txt", "scene.json"]);
 
@@ -403,12 +403,12 @@ fn case7_failures_leave_nothing_behind() {
     make_benchmark(&bench, 2, 24);
     std::fs::write(bench.join("scene_001/layers.npz"), b"not a zip").unwrap();
     let report = d.path("report");
-    let o = run(&["eval", "--benchmark", p(&bench), "--out", p(&report), "-q"]);
+    let o = run(&["eval", "--benchmark", p(&bench), "--output", p(&report), "-q"]);
     expect(&o, 1, &["scene_001", "layers.npz"]);
     assert!(!report.exists());
     std::fs::create_dir(&report).unwrap();
     std::fs::write(report.join("mine.txt"), b"m").unwrap();
-    let o = run(&["eval", "--benchmark", p(&bench), "--out", p(&report), "-q"]);
+    let o = run(&["eval", "--benchmark", p(&bench), "--output", p(&report), "-q"]);
     assert_eq!(o.status.code(), Some(1));
     assert_eq!(names(&report), ["mine.txt"]);
 
@@ -422,7 +422,7 @@ fn case7_failures_leave_nothing_behind() {
         "gallery",
         "--images",
         p(&photos),
-        "--out",
+        "--output",
         p(&gallery),
         "-q",
     ]);
