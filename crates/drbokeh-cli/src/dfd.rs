@@ -51,7 +51,12 @@ pub struct OptimiserArgs {
     /// brightness with the disparity), mask (leave every pixel they can reach out of the
     /// loss) or ignore. (Formerly --highlights, kept as an alias: render's --highlight is
     /// another thing.)
-    #[arg(long = "clipped", alias = "highlights", default_value = "model", value_name = "MODE")]
+    #[arg(
+        long = "clipped",
+        alias = "highlights",
+        default_value = "model",
+        value_name = "MODE"
+    )]
     pub highlights: String,
     /// Initial disparity: sweepN (default sweep9: render the pair at N constant
     /// disparities, keep per pixel the one that matches best over an edge-aware window),

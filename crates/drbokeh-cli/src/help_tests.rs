@@ -63,7 +63,7 @@ fn examples(help: &str) -> Vec<String> {
 /// Parses a command line as `main` does; `Err` with clap's message when it does not.
 fn parse(line: &str) -> Result<(), String> {
     let words: Vec<&str> = line.split_whitespace().collect();
-    match cli_command().try_get_matches_from(&words) {
+    match cli_command().try_get_matches_from(words) {
         Ok(_) => Ok(()),
         // `drbokeh render --help` is a fine example.
         Err(e) if e.kind() == clap::error::ErrorKind::DisplayHelp => Ok(()),
@@ -113,7 +113,10 @@ fn every_command_help_has_a_description_and_examples_that_parse() {
 fn the_parser_of_examples_would_catch_a_wrapped_or_wrong_example() {
     let help = "Examples:\n  drbokeh render --demo \\\n      -o a.png\n  drbokeh render --demo\n  -o b.png\n\nMore";
     let ex = examples(help);
-    assert_eq!(ex, ["drbokeh render --demo -o a.png", "drbokeh render --demo"]);
+    assert_eq!(
+        ex,
+        ["drbokeh render --demo -o a.png", "drbokeh render --demo"]
+    );
     assert!(parse(&ex[0]).is_ok());
     // A wrapped line loses its --output: it no longer parses.
     assert!(parse(&ex[1]).is_err());
@@ -123,7 +126,9 @@ fn the_parser_of_examples_would_catch_a_wrapped_or_wrong_example() {
 #[test]
 fn every_command_that_writes_takes_dash_o_and_output_and_out_still_works() {
     for (path, c) in commands() {
-        let Some(output) = c.get_arguments().find(|a| a.get_id() == "output" || a.get_id() == "out")
+        let Some(output) = c
+            .get_arguments()
+            .find(|a| a.get_id() == "output" || a.get_id() == "out")
         else {
             continue;
         };
@@ -185,7 +190,11 @@ fn readme_command_table_lists_exactly_the_commands() {
         .map(|(p, _)| p)
         .collect();
     for c in &leaves {
-        assert!(table.contains(c), "README's command table lacks drbokeh {}", c.join(" "));
+        assert!(
+            table.contains(c),
+            "README's command table lacks drbokeh {}",
+            c.join(" ")
+        );
     }
     for t in &table {
         assert!(

@@ -98,7 +98,14 @@ fn dfd_rejects_bad_input() {
         "{}",
         stderr(&o)
     );
-    let o = run(&["--defocused", p(&a), "--method", "nope", "--output", p(&out)]);
+    let o = run(&[
+        "--defocused",
+        p(&a),
+        "--method",
+        "nope",
+        "--output",
+        p(&out),
+    ]);
     assert!(stderr(&o).contains("unknown layer"), "{}", stderr(&o));
     let o = run(&[
         "--defocused",

@@ -358,10 +358,17 @@ fn case7_sigint_removes_temporaries_and_stale_ones_are_swept() {
 
     // SIGINT while eval is writing its report tree: the temporaries go, exit 130.
     let report = d.path("report");
-    let mut child = command(&["eval", "--benchmark", p(&bench), "--output", p(&report), "-q"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = command(&[
+        "eval",
+        "--benchmark",
+        p(&bench),
+        "--output",
+        p(&report),
+        "-q",
+    ])
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
     let t = Instant::now();
     let temp_seen = loop {
         if names(d.0.path()).iter().any(|n| n.starts_with(".drbokeh-")) {
@@ -394,7 +401,14 @@ fn case7_failures_leave_nothing_behind() {
     expect(&o, 1, &["f.txt", "exists and is not a directory"]);
     assert_eq!(std::fs::read(&file).unwrap(), b"keep");
     // trace --force onto the directory holding the scene file: refused.
-    let o = run(&["trace", p(&scene), "--output", p(d.0.path()), "--force", "-q"]);
+    let o = run(&[
+        "trace",
+        p(&scene),
+        "--output",
+        p(d.0.path()),
+        "--force",
+        "-q",
+    ]);
     expect(&o, 1, &["would replace the input", "scene.json"]);
     assert_eq!(d.names(), ["f.txt", "scene.json"]);
 
@@ -403,12 +417,26 @@ fn case7_failures_leave_nothing_behind() {
     make_benchmark(&bench, 2, 24);
     std::fs::write(bench.join("scene_001/layers.npz"), b"not a zip").unwrap();
     let report = d.path("report");
-    let o = run(&["eval", "--benchmark", p(&bench), "--output", p(&report), "-q"]);
+    let o = run(&[
+        "eval",
+        "--benchmark",
+        p(&bench),
+        "--output",
+        p(&report),
+        "-q",
+    ]);
     expect(&o, 1, &["scene_001", "layers.npz"]);
     assert!(!report.exists());
     std::fs::create_dir(&report).unwrap();
     std::fs::write(report.join("mine.txt"), b"m").unwrap();
-    let o = run(&["eval", "--benchmark", p(&bench), "--output", p(&report), "-q"]);
+    let o = run(&[
+        "eval",
+        "--benchmark",
+        p(&bench),
+        "--output",
+        p(&report),
+        "-q",
+    ]);
     assert_eq!(o.status.code(), Some(1));
     assert_eq!(names(&report), ["mine.txt"]);
 

@@ -3,10 +3,11 @@
 //! it (the script's `pic` lines are read here), and the sample photo with a fresh trace of
 //! its scene. The README's photo example runs exactly as written.
 //!
-//! Pictures are JPEG (quality 92), so a fresh render is compared by PSNR, not by bytes: the
-//! JPEG round trip of these pictures is 40 dB or more, while a changed default (the paper
-//! preset instead of physical, the demo's old clipped lights) falls to 33 dB or less
-//! (measured; the test checks that the bound separates them).
+//! Pictures are JPEG (quality 92), so a fresh render is compared by PSNR, not by bytes
+//! (bytes could differ in the last bit across CPUs): the JPEG round trip of these pictures
+//! is 44.0 to 46.2 dB (measured), while a changed default falls well below the bound of 41
+//! dB: the demo rendered with the paper preset instead of physical is 37.7 dB from
+//! docs/demo.jpg (the test checks that this stays below the bound).
 
 mod common;
 
@@ -14,7 +15,7 @@ use common::{drbokeh, p, stderr};
 use std::path::{Path, PathBuf};
 
 /// The PSNR (dB, 8-bit) a committed JPEG must keep against a fresh render.
-const MIN_PSNR_DB: f64 = 37.0;
+const MIN_PSNR_DB: f64 = 41.0;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -80,6 +81,7 @@ fn committed_pictures_match_a_fresh_render_of_the_current_defaults() {
         let fresh = dir.path().join("fresh.png");
         render(args, &fresh);
         let db = psnr(&rgb8(&committed), &rgb8(&fresh));
+        eprintln!("{name}: {db:.1} dB against a fresh render");
         assert!(
             db >= MIN_PSNR_DB,
             "{name} is stale: {db:.1} dB against `drbokeh {}` (run scripts/make-pictures)",
@@ -88,9 +90,13 @@ fn committed_pictures_match_a_fresh_render_of_the_current_defaults() {
     }
     // The bound catches a changed default: the demo picture against the paper preset.
     let other = dir.path().join("paper.png");
-    render(&["render", "--demo", "--preset", "paper"].map(String::from), &other);
+    render(
+        &["render", "--demo", "--preset", "paper"].map(String::from),
+        &other,
+    );
     let db = psnr(&rgb8(&root().join("docs/demo.jpg")), &rgb8(&other));
-    assert!(db < MIN_PSNR_DB - 3.0, "paper vs physical demo: {db:.1} dB");
+    eprintln!("docs/demo.jpg: {db:.1} dB against the paper preset");
+    assert!(db < MIN_PSNR_DB - 2.0, "paper vs physical demo: {db:.1} dB");
 }
 
 #[test]
@@ -126,13 +132,17 @@ fn sample_photo_is_our_trace_of_its_scene() {
         .map(|(&a, &b)| (a as i32 - b as i32).abs())
         .max()
         .unwrap();
-    assert!(max_diff <= 1, "examples/photo.png differs from the trace by {max_diff}/255");
+    assert!(
+        max_diff <= 1,
+        "examples/photo.png differs from the trace by {max_diff}/255"
+    );
 }
 
 #[test]
 fn readme_photo_example_runs_as_written() {
     let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let line = "drbokeh render --image examples/photo.png --disparity examples/photo.disp.png -o out.png";
+    let line =
+        "drbokeh render --image examples/photo.png --disparity examples/photo.disp.png -o out.png";
     assert!(readme.contains(line), "README.md lacks `{line}`");
     let dir = tempfile::tempdir().unwrap();
     let args: Vec<&str> = line.split_whitespace().skip(1).collect();
@@ -161,8 +171,41 @@ fn readme_photo_example_runs_as_written() {
         &region(&out, w / 2 - 12, h / 2 - 12, w / 2 + 12, h / 2 + 12),
         &region(&input, w / 2 - 12, h / 2 - 12, w / 2 + 12, h / 2 + 12),
     );
-    let top = psnr(&region(&out, 0, 0, w, h / 6), &region(&input, 0, 0, w, h / 6));
-    assert!(centre > 30.0 && top < centre - 6.0, "centre {centre:.1} dB, top {top:.1} dB");
+    // The city's lit windows on the right (far behind the focus) are blurred away.
+    let city = psnr(
+        &region(&out, 340, 90, 420, 280),
+        &region(&input, 340, 90, 420, 280),
+    );
+    eprintln!("centre {centre:.1} dB, city {city:.1} dB");
+    assert!(
+        centre > 30.0 && city < centre - 8.0,
+        "centre {centre:.1} dB, city {city:.1} dB"
+    );
     // The message names the layers and focus it used.
     assert!(stderr(&o).contains("rendered 480x320"), "{}", stderr(&o));
+}
+
+#[test]
+fn demo_bokeh_balls_are_bright() {
+    // The sky (the top fifth of the demo) is dark blue, about 26/255; its lights turn into
+    // bokeh balls. Clipped at white (linear 1.0) they were dim grey discs: the 95th
+    // percentile of the sky's brightness was 50/255 (54 with --highlight). As HDR lights
+    // (6 to 30x white) it is about 163/255.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.png");
+    render(&["render", "--demo"].map(String::from), &out);
+    let img = rgb8(&out);
+    let (w, h) = img.dimensions();
+    let mut sky: Vec<f64> = (0..h / 5)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| img.get_pixel(x, y).0.iter().map(|&c| c as f64).sum::<f64>() / 3.0)
+        .collect();
+    sky.sort_by(f64::total_cmp);
+    let median = sky[sky.len() / 2];
+    let p95 = sky[sky.len() * 95 / 100];
+    assert!(median < 40.0, "the sky is {median}/255");
+    assert!(
+        p95 >= 120.0,
+        "the bokeh balls are dim: 95th percentile {p95}/255"
+    );
 }
