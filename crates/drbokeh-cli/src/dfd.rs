@@ -154,14 +154,14 @@ fn parse_init(s: &str) -> Result<Init> {
 /// Loss: 0.5 L1 + 20 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
 /// started from a plane sweep, at the finest scale a cost budget allows; clipped
 /// highlights of the all-in-focus image are modelled (their lost energy is found in the
-/// defocused image); pixels the defocused image clips are left out. Writes the disparity (near = 1), a confidence map
-/// (where the pair carries depth information), a preview and a JSON log of every
-/// iteration and the time per scale.
+/// defocused image); pixels the defocused image clips are left out. Writes the disparity
+/// (near = 1), a confidence map (where the pair carries depth information), a preview and
+/// a JSON log of every iteration and the time per scale.
 ///
 /// Examples (a ray-traced pair with its camera, then a pair from a benchmark scene):
 ///   drbokeh trace examples/photo-scene.json -o photo-trace
 ///   drbokeh dfd --all-in-focus photo-trace/aif.png \
-///       --defocused photo-trace/bokeh.png --focus 0.351 --blur 14.7 \
+///       --defocused photo-trace/bokeh.png --focus 0.351 --blur 18.38 \
 ///       -o disp.png
 ///   drbokeh dfd --all-in-focus bench/scene_003/aif.png \
 ///       --defocused bench/scene_003/bokeh.png --focus 1 --blur 8.98 \

@@ -12,13 +12,13 @@ use std::time::Instant;
 
 /// Decompose a photo (image + disparity, optional matte) into an inpainted layer stack.
 ///
-/// No learned model, no downloads.
-/// With --alpha: the paper's two layers (foreground = matte; background inpainted under
-/// it). Without: up to --max-layers depth layers cut at disparity discontinuities, each
-/// layer's hidden part inpainted (colour by fast marching, disparity by a smooth fill from
-/// the far side). Writes STACK.npz (input to `drbokeh render --layers`) and, unless
-/// --no-preview, STACK.layerK.png (colour over a checkerboard by alpha) and
-/// STACK.layerK.disparity.png for every layer K (0 = front). See docs/layering.md.
+/// No learned model, no downloads. With --alpha: the paper's two layers (foreground =
+/// matte; background inpainted under it). Without: up to --max-layers depth layers cut at
+/// disparity discontinuities, each layer's hidden part inpainted (colour by fast marching,
+/// disparity by a smooth fill from the far side). Writes STACK.npz (input to `drbokeh
+/// render --layers`) and, unless --no-preview, STACK.layerK.png (colour over a checkerboard
+/// by alpha) and STACK.layerK.disparity.png for every layer K (0 = front). See
+/// docs/layering.md.
 ///
 /// Examples:
 ///   drbokeh layers --image examples/photo.png \

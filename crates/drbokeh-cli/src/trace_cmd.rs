@@ -10,16 +10,16 @@ use std::time::Instant;
 
 /// Path-trace a billboard scene through a real (thick, spherical) lens: ground truth.
 ///
-/// The lens is a thick spherical one (or an ideal thin lens).
-/// Writes into DIR: bokeh.png (16-bit) and bokeh.exr (linear) — the ground-truth defocused
-/// image; aif.png/aif.exr — the all-in-focus image through the chief ray; depth.npy (mm),
-/// disparity.npy and disparity.png; layers.npz — the layered ground truth as a drbokeh
-/// layer stack (front first); scene.json — every parameter, including the renderer's
-/// equivalent `blur` (K) and `focus`. The directory appears only once complete.
+/// The lens is a thick spherical one (or an ideal thin lens). Writes into DIR: bokeh.png
+/// (16-bit) and bokeh.exr (linear) — the ground-truth defocused image; aif.png/aif.exr —
+/// the all-in-focus image through the chief ray; depth.npy (mm), disparity.npy and
+/// disparity.png; layers.npz — the layered ground truth as a drbokeh layer stack (front
+/// first); scene.json — every parameter, including the renderer's equivalent `blur` (K) and
+/// `focus`. The directory appears only once complete.
 ///
 /// Examples (the summary line names the renderer's equivalent --blur and --focus):
 ///   drbokeh trace examples/photo-scene.json -o photo-trace
-///   drbokeh render --layers photo-trace/layers.npz --blur 14.7 --focus 0.351 \
+///   drbokeh render --layers photo-trace/layers.npz --blur 18.38 --focus 0.351 \
 ///       -o r.png
 ///   drbokeh trace examples/scene.json --spp 64 -o scene-trace --force
 #[derive(Args, Debug)]

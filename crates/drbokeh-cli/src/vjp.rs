@@ -9,11 +9,12 @@ use std::path::PathBuf;
 
 /// Exact gradients of sum(G * render) w.r.t. colour, alpha, disparity, blur and focus.
 ///
-/// The vector-Jacobian product of the render. `render` is what `drbokeh render --output x.npy` writes with the same flags (display-encoded
-/// values). The output NPZ holds `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W) and the
-/// scalars `blur` (d/dK) and `focus` (d/df); float64 with --f64. With --image/--disparity
-/// the image is decomposed into layers exactly as `render` does for the same focus and blur
-/// (one opaque layer with --single-layer), and N is that stack's layer count.
+/// The vector-Jacobian product of the render. `render` is what `drbokeh render -o x.npy`
+/// writes with the same flags (display-encoded values). The output NPZ holds `rgb`
+/// (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W) and the scalars `blur` (d/dK) and
+/// `focus` (d/df); float64 with --f64. With --image/--disparity the image is decomposed
+/// into layers exactly as `render` does for the same focus and blur (one opaque layer
+/// with --single-layer), and N is that stack's layer count.
 ///
 /// --engine auto (the default) runs forward and backward on the fast engine in f32 (only the
 /// taps that can contribute; within 1e-5 of the exact gradient's largest value, tested) and
