@@ -529,8 +529,10 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
                     let dx0 = start - src.xs;
                     let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
                         // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
+                        // One vector load, then reversed in registers (indexing the slice
+                        // backwards compiles to eight scalar loads).
                         let at = (base - (dx0 + lanes - 1)) as usize;
-                        let half: &[T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                        let half: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
                         std::array::from_fn(|l| half[LANES - 1 - l])
                     } else {
                         let at = (base + dx0) as usize;
