@@ -141,7 +141,9 @@ mod tests {
             let img = sample(channels);
             let mut bytes = std::io::Cursor::new(Vec::new());
             exr_rows(Path::new("t.exr"), &mut bytes, &img, |v| 2.0 * v).unwrap();
-            let decoded = image::load_from_memory(bytes.get_ref()).unwrap().to_rgb32f();
+            let decoded = image::load_from_memory(bytes.get_ref())
+                .unwrap()
+                .to_rgb32f();
             let got = decoded.into_raw();
             let want: Vec<f32> = img
                 .data

@@ -361,9 +361,9 @@ impl Staging {
                     }
                 })
             }
-            OutputFormat::Exr => {
-                self.file(path, |out| super::encode::exr_rows(path, out, image, to_linear))
-            }
+            OutputFormat::Exr => self.file(path, |out| {
+                super::encode::exr_rows(path, out, image, to_linear)
+            }),
             OutputFormat::Jpeg => {
                 let data = image
                     .data
