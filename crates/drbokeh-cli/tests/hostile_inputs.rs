@@ -473,6 +473,9 @@ fn nits_usage_errors_exit_2_with_the_option_named() {
     expect(&o, 2, &["--focus", "must be in [0, 1], got -1"]);
     let o = with(&["--offset", "-0.5", "-o", p(&out)]);
     expect(&o, 2, &["--offset", "must be in [0, 1]"]);
+    // A negative coordinate is the value of --focus-at, not an unknown option.
+    let o = with(&["--focus-at", "-1,2", "-o", p(&out)]);
+    expect(&o, 2, &["invalid parameter --focus-at", "'-1,2'"]);
     // Bit depths: every bad value is a usage error; 16 bits with JPEG is refused.
     for bad in ["12", "32"] {
         let o = with(&["--bit-depth", bad, "-o", p(&out)]);
