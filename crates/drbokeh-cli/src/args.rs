@@ -78,7 +78,7 @@ pub struct CameraArgs {
     /// Tap to focus: focus on the disparity at pixel X,Y (frontmost layer with alpha >= 0.5).
     /// Without --focus or --focus-at, the demo focuses on its subject and other inputs on
     /// the centre pixel.
-    #[arg(long, value_name = "X,Y")]
+    #[arg(long, value_name = "X,Y", allow_hyphen_values = true)]
     pub focus_at: Option<String>,
 
     /// Blur strength K: blur radius in pixels per unit of relative disparity.

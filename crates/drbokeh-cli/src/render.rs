@@ -89,6 +89,10 @@ fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let t0 = Instant::now();
     let out = drbokeh::render(&stack, &settings, engine, &bar)?;
     bar.finish();
+    // The stack is not needed to encode: free it first, so that the peak is the render's
+    // (stack + output), not stack + output + encoder (docs/limits.md).
+    let (width, height, layers) = (stack.width, stack.height, stack.layers.len());
+    drop(stack);
     let cam = &settings.camera;
     let tone = settings.tone();
     let bit_depth = if a.bit_depth == 16 {
@@ -100,9 +104,9 @@ fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     if !a.exec.quiet {
         eprintln!(
             "drbokeh: rendered {}x{}, {} layer(s), focus {:.4}, K {}, L {} in {:.2} s -> {}",
-            stack.width,
-            stack.height,
-            stack.layers.len(),
+            width,
+            height,
+            layers,
             cam.focus_disparity,
             cam.blur_k,
             cam.window.size(),

@@ -311,7 +311,7 @@ pub fn write_output<T: Real>(
     path: &Path,
     image: &Image<T>,
     bit_depth: BitDepth,
-    to_linear: impl Fn(f64) -> f64,
+    to_linear: impl Fn(f64) -> f64 + Sync,
 ) -> Result<()> {
     let mut s = Staging::new();
     s.output(path, image, bit_depth, to_linear)?;
@@ -333,7 +333,7 @@ impl Staging {
         path: &Path,
         image: &Image<T>,
         bit_depth: BitDepth,
-        to_linear: impl Fn(f64) -> f64,
+        to_linear: impl Fn(f64) -> f64 + Sync,
     ) -> Result<()> {
         let format = OutputFormat::from_path(path)?;
         let (w, h) = (image.width as u32, image.height as u32);
@@ -361,19 +361,9 @@ impl Staging {
                     }
                 })
             }
-            OutputFormat::Exr => {
-                let data: Vec<f32> = image
-                    .data
-                    .iter()
-                    .map(|v| to_linear(v.f64()) as f32)
-                    .collect();
-                let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
-                self.file(path, |out| {
-                    DynamicImage::ImageRgb32F(buf)
-                        .write_to(out, ImageFormat::OpenExr)
-                        .map_err(fail)
-                })
-            }
+            OutputFormat::Exr => self.file(path, |out| {
+                super::encode::exr_rows(path, out, image, to_linear)
+            }),
             OutputFormat::Jpeg => {
                 let data = image
                     .data
@@ -387,12 +377,10 @@ impl Staging {
                         .map_err(fail)
                 })
             }
-            OutputFormat::Png | OutputFormat::Tiff => {
-                let fmt = if format == OutputFormat::Png {
-                    ImageFormat::Png
-                } else {
-                    ImageFormat::Tiff
-                };
+            OutputFormat::Png => self.file(path, |out| {
+                super::encode::png_rows(path, out, image, bit_depth == BitDepth::Sixteen)
+            }),
+            OutputFormat::Tiff => {
                 let clip = |v: T| v.f64().clamp(0.0, 1.0);
                 let dynimg = match bit_depth {
                     BitDepth::Eight => DynamicImage::ImageRgb8(
@@ -420,30 +408,17 @@ impl Staging {
                         .unwrap(),
                     ),
                 };
-                self.file(path, |out| dynimg.write_to(out, fmt).map_err(fail))
+                self.file(path, |out| {
+                    dynimg.write_to(out, ImageFormat::Tiff).map_err(fail)
+                })
             }
         }
     }
 
     /// Stages a one-channel map (see [`write_grey`]); visible at [`Staging::commit`].
     pub fn grey<T: Real>(&mut self, path: &Path, image: &Image<T>) -> Result<()> {
-        let (w, h) = (image.width as u32, image.height as u32);
-        let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
         match extension(path).as_str() {
-            "png" => {
-                let data = image
-                    .data
-                    .iter()
-                    .map(|v| (v.f64().clamp(0.0, 1.0) * 65535.0).round() as u16)
-                    .collect();
-                let buf =
-                    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, data).unwrap();
-                self.file(path, |out| {
-                    DynamicImage::ImageLuma16(buf)
-                        .write_to(out, ImageFormat::Png)
-                        .map_err(fail)
-                })
-            }
+            "png" => self.file(path, |out| super::encode::png_rows(path, out, image, true)),
             "npy" => {
                 use ndarray_npy::WriteNpyExt;
                 let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
@@ -454,19 +429,7 @@ impl Staging {
                         .map_err(|e| Error::file(path, format!("write failed: {e}")))
                 })
             }
-            "exr" => {
-                let data: Vec<f32> = image
-                    .data
-                    .iter()
-                    .flat_map(|v| [v.f64() as f32; 3])
-                    .collect();
-                let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
-                self.file(path, |out| {
-                    DynamicImage::ImageRgb32F(buf)
-                        .write_to(out, ImageFormat::OpenExr)
-                        .map_err(fail)
-                })
-            }
+            "exr" => self.file(path, |out| super::encode::exr_rows(path, out, image, |v| v)),
             e => Err(Error::file(
                 path,
                 format!("unsupported extension '.{e}' for a map (use .png, .npy or .exr)"),
