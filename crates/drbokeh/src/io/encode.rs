@@ -9,6 +9,16 @@ use crate::{Error, Real, Result};
 use std::io::{Seek, Write};
 use std::path::Path;
 
+/// An encoded value in [0, 1] as an 8-bit sample: `round(clamp(v, 0, 1) x 255)`.
+pub(crate) fn quantize_u8(v: f64) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// An encoded value in [0, 1] as a 16-bit sample: `round(clamp(v, 0, 1) x 65535)`.
+pub(crate) fn quantize_u16(v: f64) -> u16 {
+    (v.clamp(0.0, 1.0) * 65535.0).round() as u16
+}
+
 /// Bytes of compressed data per PNG `IDAT` chunk.
 const PNG_CHUNK_BYTES: usize = 1 << 18;
 
@@ -50,11 +60,10 @@ pub(crate) fn png_rows<T: Real, W: Write>(
     for values in image.data.chunks_exact(row_values.max(1)) {
         row.clear();
         for &v in values {
-            let v = v.f64().clamp(0.0, 1.0);
             if sixteen {
-                row.extend_from_slice(&((v * 65535.0).round() as u16).to_be_bytes());
+                row.extend_from_slice(&quantize_u16(v.f64()).to_be_bytes());
             } else {
-                row.push((v * 255.0).round() as u8);
+                row.push(quantize_u8(v.f64()));
             }
         }
         stream.write_all(&row).map_err(io_fail)?;

@@ -1,6 +1,7 @@
 //! Raster images through the `image` crate: PNG (8/16-bit), JPEG, TIFF, EXR.
 //! Colour read from PNG/JPEG/TIFF is display-encoded; EXR holds linear light.
 
+use super::encode::{quantize_u16, quantize_u8};
 use super::files::{extension, open};
 use super::npy::{self, Integers};
 use super::npz::Npz;
@@ -365,11 +366,7 @@ impl Staging {
                 super::encode::exr_rows(path, out, image, to_linear)
             }),
             OutputFormat::Jpeg => {
-                let data = image
-                    .data
-                    .iter()
-                    .map(|&v| (v.f64().clamp(0.0, 1.0) * 255.0).round() as u8)
-                    .collect();
+                let data = image.data.iter().map(|&v| quantize_u8(v.f64())).collect();
                 let buf = image::RgbImage::from_raw(w, h, data).unwrap();
                 self.file(path, |out| {
                     image::codecs::jpeg::JpegEncoder::new_with_quality(out, 92)
@@ -381,17 +378,12 @@ impl Staging {
                 super::encode::png_rows(path, out, image, bit_depth == BitDepth::Sixteen)
             }),
             OutputFormat::Tiff => {
-                let clip = |v: T| v.f64().clamp(0.0, 1.0);
                 let dynimg = match bit_depth {
                     BitDepth::Eight => DynamicImage::ImageRgb8(
                         image::RgbImage::from_raw(
                             w,
                             h,
-                            image
-                                .data
-                                .iter()
-                                .map(|&v| (clip(v) * 255.0).round() as u8)
-                                .collect(),
+                            image.data.iter().map(|&v| quantize_u8(v.f64())).collect(),
                         )
                         .unwrap(),
                     ),
@@ -399,11 +391,7 @@ impl Staging {
                         image::ImageBuffer::from_raw(
                             w,
                             h,
-                            image
-                                .data
-                                .iter()
-                                .map(|&v| (clip(v) * 65535.0).round() as u16)
-                                .collect(),
+                            image.data.iter().map(|&v| quantize_u16(v.f64())).collect(),
                         )
                         .unwrap(),
                     ),
