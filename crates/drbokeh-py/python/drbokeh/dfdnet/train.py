@@ -46,8 +46,8 @@ class RunSpec:
 
 
 # The table: the four layers with L1+G+HSSIM, the loss ablation through `physical` (the
-# structure terms, and the clipped-highlight treatment), and the supervised upper bound
-# (slowest first, for the process pool).
+# structure terms, and the clipped-highlight treatment), the two baselines with L1+G (the
+# layers compared under the loss where `physical` is best), and the supervised upper bound.
 TABLE_RUNS: List[RunSpec] = [
     RunSpec("physical", "hssim"),
     RunSpec("physical", "ssim"),
@@ -56,6 +56,8 @@ TABLE_RUNS: List[RunSpec] = [
     RunSpec("gausspsf", "hssim"),
     RunSpec("aperture", "hssim"),
     RunSpec("paper", "hssim"),
+    RunSpec("gausspsf", "l1g"),
+    RunSpec("aperture", "l1g"),
     RunSpec("supervised"),
 ]
 
