@@ -1,7 +1,8 @@
 """drbokeh.dfdnet: the losses against their written formulas (the Rust loss module's
 definitions, computed here with plain NumPy loops), the PyTorch GaussPSF and aperture
 layers against NumPy transcriptions of the Rust baselines and with gradcheck, and the
-quick training run (loss falls; the drbokeh layer beats the untrained network)."""
+quick training run (the loss falls; the drbokeh layer beating the untrained network is the
+issue's target, not met, so a strict xfail), the highlight modes' mask and energy."""
 
 from __future__ import annotations
 
@@ -97,6 +98,70 @@ def test_ssim_and_hssim_match_their_formulas():
         losses.ssim_sized(tx[..., :20, :20], ty[..., :20, :20], 21)
 
 
+def test_masked_ssim_is_the_mean_over_kept_window_centres():
+    x = _rand(11, 2, 3, 33, 33)
+    y = np.clip(x + 0.2 * _rand(12, 2, 3, 33, 33) - 0.1, 0, 1)
+    tx, ty = torch.from_numpy(x), torch.from_numpy(y)
+    ones = torch.ones(2, 1, 33, 33, dtype=torch.float64)
+    assert torch.allclose(losses.hssim(tx, ty, ones), losses.hssim(tx, ty), rtol=1e-12)
+    x, y, tx, ty, ones = x[..., :24, :24], y[..., :24, :24], tx[..., :24, :24], ty[..., :24, :24], ones[..., :24, :24]
+    # Keep only window centres in the left half: the mean over those entries of the map.
+    mask = ones.clone()
+    mask[..., 12:] = 0
+    r = 2
+    full = losses.ssim(tx, ty, r, 5 / 6.0, None)
+    got = losses.ssim(tx, ty, r, 5 / 6.0, mask)
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    for b in range(2):
+        vals = []
+        for ch in range(3):
+            for yy in range(r, 24 - r):
+                for xx in range(r, 12):
+                    vals.append(_np_ssim(x[b, ch : ch + 1, yy - r : yy + r + 1, xx - r : xx + r + 1],
+                                         y[b, ch : ch + 1, yy - r : yy + r + 1, xx - r : xx + r + 1], r, 5 / 6.0))
+        assert float(got[b]) == pytest.approx(np.mean(vals), rel=1e-10)
+        assert float(got[b]) != pytest.approx(float(full[b]), rel=1e-6)
+    # Nothing kept: no loss (SSIM 1).
+    assert torch.all(losses.ssim(tx, ty, r, 5 / 6.0, torch.zeros_like(ones)) == 1.0)
+
+
+def test_highlight_reach_and_energy():
+    from drbokeh.dfdnet import highlights
+
+    # Reach: one clipped pixel; K = 4 -> every pixel within 5 px of it is left out.
+    aif = np.full((1, 3, 21, 21), 0.3, np.float32)
+    aif[0, :, 10, 10] = 1.0
+    keep = highlights.reach_mask(aif, np.array([4.0], np.float32))[0, 0]
+    yy, xx = np.mgrid[:21, :21]
+    dist2 = (yy - 10) ** 2 + (xx - 10) ** 2
+    assert np.array_equal(keep == 0, dist2 <= 25)
+    # Energy: a highlight of 6x white (linear) spread into a disc of radius 5 over a
+    # background of 0.2; the clipped pixel gets its light back.
+    bg = 0.2
+    aif = np.full((1, 3, 40, 40), bg ** (1 / 2.2), np.float32)
+    aif[0, :, 20, 20] = 1.0
+    yy, xx = np.mgrid[:40, :40]
+    disc = (yy - 20) ** 2 + (xx - 20) ** 2 <= 25
+    lin = np.full((3, 40, 40), bg)
+    lin[:, disc] += (6.0 - bg) / disc.sum()
+    bokeh = (lin ** (1 / 2.2)).astype(np.float32)[None]
+    src = highlights.energy_source(aif, bokeh, np.array([6.0], np.float32))
+    assert src[0, :, 20, 20] ** 2.2 == pytest.approx([6.0] * 3, rel=1e-3)
+    unclipped = np.ones((40, 40), bool)
+    unclipped[20, 20] = False
+    assert np.array_equal(src[0][:, unclipped], aif[0][:, unclipped])
+
+
+def test_run_names_round_trip():
+    from drbokeh.dfdnet.train import TABLE_RUNS, parse_run
+
+    for spec in TABLE_RUNS:
+        assert parse_run(spec.name) == spec
+    assert parse_run("physical-hssim-none").highlights == "none"
+    with pytest.raises(ValueError, match="unknown run"):
+        parse_run("physical-hssim-bright")
+
+
 # ---- layers: NumPy transcriptions of crates/drbokeh/src/baselines ---------------------------
 
 
@@ -176,22 +241,38 @@ def test_drbokeh_layer_renders_one_opaque_layer():
 # ---- the quick training run -----------------------------------------------------------------
 
 
-def test_quick_training_loss_falls_and_is_recorded(tmp_path):
-    """``train --quick``: tiny ray-traced data made through the CLI, 40 steps through the
-    drbokeh ``physical`` layer. The training loss must fall. The issue also asks that the
-    trained network beat the untrained one on the test scenes; it does not (docs/dfdnet.md:
-    the defocus loss is lower at wrong disparities than at the truth on traced pairs, so
-    the network does not learn the disparity level), so that comparison is recorded in
-    results.json and reported, not asserted."""
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    """``train --quick`` once for the tests below: tiny ray-traced data made through the CLI,
+    40 steps through the drbokeh ``physical`` layer (L1+G+HSSIM, highlights ``energy``)."""
+    out = tmp_path_factory.mktemp("dfdnet") / "q"
     env = dict(os.environ, DRBOKEH_CLI=str(_find_cli()))
     p = subprocess.run(
-        [sys.executable, "-m", "drbokeh.dfdnet", "train", "--quick", "--out", str(tmp_path / "q")],
+        [sys.executable, "-m", "drbokeh.dfdnet", "train", "--quick", "--out", str(out)],
         capture_output=True, text=True, env=env, timeout=600,
     )
     assert p.returncode == 0, p.stderr + p.stdout
-    r = json.loads((tmp_path / "q" / "results.json").read_text())
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_quick_training_loss_falls_and_is_recorded(quick_run):
+    out, r = quick_run
     assert r["loss_last"] < 0.9 * r["loss_first"], r
     assert 0.0 < r["test_mae_trained"] < 1.0 and 0.0 < r["test_mae_untrained"] < 1.0, r
-    assert (tmp_path / "q" / "physical-hssim" / "model.pt").is_file()
-    log = json.loads((tmp_path / "q" / "physical-hssim" / "log.json").read_text())
+    assert (out / "physical-hssim" / "model.pt").is_file()
+    log = json.loads((out / "physical-hssim" / "log.json").read_text())
     assert len(log["curve"]) == r["steps"] and log["parameters"] > 0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 17's target, not met: on traced pairs the background is untextured, so the "
+    "defocus loss leaves its disparity undetermined and the network drifts from the untrained "
+    "level instead of learning depth (docs/dfdnet.md; quick run: 0.54 vs 0.45)",
+)
+def test_quick_training_beats_the_untrained_network(quick_run):
+    """The issue's check: the network trained through drbokeh ``physical`` has a lower test
+    MAE than the same network untrained, by at least 0.02 (the untrained one is at about
+    0.45). Strict xfail: when it starts passing, this marker must go."""
+    _, r = quick_run
+    assert r["test_mae_trained"] < r["test_mae_untrained"] - 0.02, r

@@ -22,7 +22,7 @@ import numpy as np
 
 from .data import SplitSpec, default_splits, prepare, subset
 from .evaluate import evaluate, metrics
-from .train import TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
+from .train import HIGHLIGHTS, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
 
 _log = log_line
@@ -43,6 +43,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--crop", type=int, default=TrainConfig.crop, help="training crop side, a multiple of 16")
     p.add_argument("--base", type=int, default=TrainConfig.base, help=f"U-Net width (default {TrainConfig.base}: about 1.1 M parameters)")
     p.add_argument("--lr", type=float, default=TrainConfig.lr)
+    p.add_argument("--highlights", choices=HIGHLIGHTS, default=TrainConfig.highlights,
+                   help=f"clipped highlights in the loss (default {TrainConfig.highlights}; docs/dfdnet.md)")
+    p.add_argument("--init-disparity", type=float, default=TrainConfig.init_disparity,
+                   help="initial disparity output (the head's bias; default: PyTorch's initialisation, about 0.5)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
     p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised); default: the table: "
                    + ",".join(r.name for r in TABLE_RUNS))
@@ -55,7 +59,8 @@ def _specs(a: argparse.Namespace) -> List[SplitSpec]:
 def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
-    return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, threads=a.threads)
+    return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, threads=a.threads,
+                       highlights=a.highlights, init_disparity=a.init_disparity)
 
 
 def _runs(a: argparse.Namespace) -> List[RunSpec]:
@@ -102,7 +107,8 @@ def _quick(a: argparse.Namespace) -> None:
     ``physical``."""
     specs = [SplitSpec("train", 1711, 8, 96, 64), SplitSpec("val", 1712, 3, 96, 64), SplitSpec("test", 1713, 8, 96, 64)]
     cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=2, crop=64, base=8,
-                      lr=2e-3, eval_every=10, threads=a.threads)
+                      lr=2e-3, eval_every=10, threads=a.threads, highlights=a.highlights,
+                      init_disparity=a.init_disparity)
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     splits = {k: subset(v, v.blur >= 3.0) for k, v in splits.items()}

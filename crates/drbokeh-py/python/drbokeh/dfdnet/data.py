@@ -169,17 +169,22 @@ def subset(split: Split, keep: np.ndarray) -> Split:
     )
 
 
-def random_crops(split: Split, indices: np.ndarray, crop: int, rng: np.random.Generator) -> Dict[str, np.ndarray]:
+def random_crops(
+    split: Split, indices: np.ndarray, crop: int, rng: np.random.Generator,
+    extra: Optional[Dict[str, np.ndarray]] = None,
+) -> Dict[str, np.ndarray]:
     """A batch of random ``crop x crop`` windows with random horizontal and vertical flips
-    (the same for image, target and disparity)."""
+    (the same for image, target and disparity, and for the ``(N, C, H, W)`` arrays in
+    ``extra``, returned under their keys). The random draws do not depend on ``extra``."""
     h, w = split.aif.shape[-2:]
-    out: Dict[str, List[np.ndarray]] = {"aif": [], "bokeh": [], "disparity": []}
+    arrays = {"aif": split.aif, "bokeh": split.bokeh, "disparity": split.disparity, **(extra or {})}
+    out: Dict[str, List[np.ndarray]] = {k: [] for k in arrays}
     for i in indices:
         y = int(rng.integers(0, h - crop + 1))
         x = int(rng.integers(0, w - crop + 1))
         fy, fx = bool(rng.integers(0, 2)), bool(rng.integers(0, 2))
         for key in out:
-            a = getattr(split, key)[i, :, y : y + crop, x : x + crop]
+            a = arrays[key][i, :, y : y + crop, x : x + crop]
             if fy:
                 a = a[:, ::-1]
             if fx:

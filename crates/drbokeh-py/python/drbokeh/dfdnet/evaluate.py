@@ -71,7 +71,7 @@ def evaluate(
         if not (run_dir / "model.pt").exists():
             continue
         log = json.loads((run_dir / "log.json").read_text())
-        p = predict(load_model(run_dir, cfg), test.aif)
+        p = predict(load_model(run_dir, spec.config(cfg)), test.aif)
         preds[spec.name] = p
         rows.append({
             "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),

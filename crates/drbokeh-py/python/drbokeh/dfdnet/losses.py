@@ -86,8 +86,12 @@ def _filter(x: torch.Tensor, w1: torch.Tensor) -> torch.Tensor:
     return F.conv2d(x, w1.view(1, 1, k, 1).expand(c, 1, k, 1), groups=c)
 
 
-def ssim(x: torch.Tensor, y: torch.Tensor, radius: int, sigma: float) -> torch.Tensor:
-    """Gaussian-window SSIM per batch item (data range 1), cropped by ``radius``."""
+def ssim(
+    x: torch.Tensor, y: torch.Tensor, radius: int, sigma: float, mask: Optional[torch.Tensor] = None
+) -> torch.Tensor:
+    """Gaussian-window SSIM per batch item (data range 1), cropped by ``radius``. With
+    ``mask`` ``(B, 1, H, W)`` (1 = use) the map's mean runs over the masked window centres
+    only (an item with none left gives 1, i.e. no loss)."""
     if x.shape[-1] <= 2 * radius or x.shape[-2] <= 2 * radius:
         raise ValueError(f"SSIM window radius {radius} too large for {tuple(x.shape[-2:])}")
     w1 = torch.tensor(gaussian_weights(radius, sigma), dtype=x.dtype, device=x.device)
@@ -97,19 +101,24 @@ def ssim(x: torch.Tensor, y: torch.Tensor, radius: int, sigma: float) -> torch.T
     vy = _filter(y * y, w1) - uy * uy
     vxy = _filter(x * y, w1) - ux * uy
     s = (2 * ux * uy + c1) * (2 * vxy + c2) / ((ux * ux + uy * uy + c1) * (vx + vy + c2))
-    return s.flatten(1).mean(1)
+    if mask is None:
+        return s.flatten(1).mean(1)
+    h, w = s.shape[-2:]
+    m = mask[..., radius : radius + h, radius : radius + w].expand_as(s)
+    n = m.flatten(1).sum(1)
+    return torch.where(n > 0, (s * m).flatten(1).sum(1) / n.clamp_min(1.0), torch.ones_like(n))
 
 
-def ssim_sized(x: torch.Tensor, y: torch.Tensor, k: int) -> torch.Tensor:
+def ssim_sized(x: torch.Tensor, y: torch.Tensor, k: int, mask: Optional[torch.Tensor] = None) -> torch.Tensor:
     """``SSIM_k``: a ``k``-tap window (radius ``(k-1)/2``) with ``sigma = k/6``."""
     if k < 3 or k % 2 == 0:
         raise ValueError(f"SSIM window size must be odd and at least 3, got {k}")
-    return ssim(x, y, (k - 1) // 2, k / 6.0)
+    return ssim(x, y, (k - 1) // 2, k / 6.0, mask)
 
 
-def hssim(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+def hssim(x: torch.Tensor, y: torch.Tensor, mask: Optional[torch.Tensor] = None) -> torch.Tensor:
     """``sum_k (1 - SSIM_k)`` over ``HSSIM_WINDOWS``, per batch item."""
-    return sum((1.0 - ssim_sized(x, y, k) for k in HSSIM_WINDOWS), torch.zeros(x.shape[0], dtype=x.dtype))
+    return sum((1.0 - ssim_sized(x, y, k, mask) for k in HSSIM_WINDOWS), torch.zeros(x.shape[0], dtype=x.dtype))
 
 
 LOSSES = ("l1g", "ssim", "hssim")
@@ -127,11 +136,13 @@ def defocus_loss(
     w_structure: float = 10.0,
     edge_sensitivity: float = 10.0,
     mask: Optional[torch.Tensor] = None,
+    structure_mask: Optional[torch.Tensor] = None,
 ) -> Tuple[torch.Tensor, dict]:
     """The training loss, averaged over the batch: ``w_l1 L1 + w_smooth G`` plus
     ``w_structure (1 - SSIM_11)`` (``loss="ssim"``) or ``w_structure HSSIM`` (``"hssim"``).
     Default weights: the published training configuration (L1 0.5, G 0.5, HSSIM 10).
-    Returns the loss and its terms (floats) for logging."""
+    ``mask`` restricts L1, ``structure_mask`` the (H)SSIM maps (both ``(B, 1, H, W)``, 1 =
+    use). Returns the loss and its terms (floats) for logging."""
     if loss not in LOSSES:
         raise ValueError(f"unknown loss {loss!r} (available: {', '.join(LOSSES)})")
     t_l1 = l1(rendered, target, mask).mean()
@@ -139,11 +150,11 @@ def defocus_loss(
     total = w_l1 * t_l1 + w_smooth * t_g
     terms = {"l1": float(t_l1.detach()), "g": float(t_g.detach())}
     if loss == "ssim":
-        t_s = (1.0 - ssim_sized(rendered, target, 11)).mean()
+        t_s = (1.0 - ssim_sized(rendered, target, 11, structure_mask)).mean()
         total = total + w_structure * t_s
         terms["ssim"] = float(t_s.detach())
     elif loss == "hssim":
-        t_s = hssim(rendered, target).mean()
+        t_s = hssim(rendered, target, structure_mask).mean()
         total = total + w_structure * t_s
         terms["hssim"] = float(t_s.detach())
     return total, terms

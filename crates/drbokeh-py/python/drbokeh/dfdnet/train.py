@@ -8,41 +8,56 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
 
 from .data import Split, random_crops
+from .highlights import energy_source, reach_mask
 from .layers import LAYERS, make_layer
 from .losses import LOSSES, defocus_loss
 from .unet import UNet, parameter_count
 
 
+HIGHLIGHTS = ("none", "reach", "energy", "energy+reach")
+
+
 @dataclass(frozen=True)
 class RunSpec:
     """``layer`` is a rendering layer (``layers.LAYERS``) or ``supervised``; ``loss`` one of
-    ``losses.LOSSES`` (ignored when supervised: L1 on the true disparity)."""
+    ``losses.LOSSES`` (ignored when supervised: L1 on the true disparity); ``highlights``
+    overrides ``TrainConfig.highlights`` for this run (the highlight ablation)."""
 
     layer: str
     loss: str = "hssim"
+    highlights: Optional[str] = None
 
     @property
     def name(self) -> str:
-        return "supervised" if self.layer == "supervised" else f"{self.layer}-{self.loss}"
+        if self.layer == "supervised":
+            return "supervised"
+        return f"{self.layer}-{self.loss}" + (f"-{self.highlights}" if self.highlights else "")
+
+    def config(self, cfg: "TrainConfig") -> "TrainConfig":
+        return cfg if self.highlights is None else replace(cfg, highlights=self.highlights)
 
 
-# The table: the four layers with L1+G+HSSIM, the loss ablation through `physical`, and the
-# supervised upper bound (slowest first, for the process pool).
+# The table: the four layers with L1+G+HSSIM, the loss ablation through `physical` (the
+# structure terms, and the clipped-highlight treatment), the two baselines with L1+G (the
+# layers compared under the loss where `physical` is best), and the supervised upper bound.
 TABLE_RUNS: List[RunSpec] = [
     RunSpec("physical", "hssim"),
     RunSpec("physical", "ssim"),
     RunSpec("physical", "l1g"),
+    RunSpec("physical", "hssim", "none"),
     RunSpec("gausspsf", "hssim"),
     RunSpec("aperture", "hssim"),
     RunSpec("paper", "hssim"),
+    RunSpec("gausspsf", "l1g"),
+    RunSpec("aperture", "l1g"),
     RunSpec("supervised"),
 ]
 
@@ -50,13 +65,15 @@ TABLE_RUNS: List[RunSpec] = [
 def parse_run(name: str) -> RunSpec:
     if name == "supervised":
         return RunSpec("supervised")
-    layer, _, loss = name.partition("-")
-    if layer not in LAYERS or loss not in LOSSES:
+    parts = name.split("-")
+    layer, loss = parts[0], parts[1] if len(parts) > 1 else ""
+    hl = parts[2] if len(parts) == 3 else None
+    if len(parts) not in (2, 3) or layer not in LAYERS or loss not in LOSSES or (hl is not None and hl not in HIGHLIGHTS):
         raise ValueError(
-            f"unknown run {name!r}: expected LAYER-LOSS (layers {', '.join(LAYERS)}; "
-            f"losses {', '.join(LOSSES)}) or supervised"
+            f"unknown run {name!r}: expected LAYER-LOSS or LAYER-LOSS-HIGHLIGHTS (layers {', '.join(LAYERS)}; "
+            f"losses {', '.join(LOSSES)}; highlights {', '.join(HIGHLIGHTS)}) or supervised"
         )
-    return RunSpec(layer, loss)
+    return RunSpec(layer, loss, hl)
 
 
 @dataclass(frozen=True)
@@ -73,11 +90,38 @@ class TrainConfig:
     w_smooth: float = 0.5
     w_structure: float = 10.0
     edge_sensitivity: float = 10.0
+    # Clipped highlights (highlights.py): "none" (the clipped photo as is, L1 leaves out
+    # pixels clipped in the traced image), "reach" (every image term leaves out the pixels a
+    # clipped all-in-focus pixel can reach), "energy" (the layer renders the photo with the
+    # highlights' missing light restored, the render clipped at white as the camera's),
+    # "energy+reach" (both).
+    highlights: str = "energy"
+    # Initial value of the disparity output (the head's bias; None: PyTorch's default
+    # initialisation, about 0.5).
+    init_disparity: Optional[float] = None
 
 
 def new_model(cfg: TrainConfig) -> UNet:
     torch.manual_seed(cfg.seed)
-    return UNet(cfg.base)
+    model = UNet(cfg.base)
+    if cfg.init_disparity is not None:
+        p = min(max(cfg.init_disparity, 1e-3), 1 - 1e-3)
+        with torch.no_grad():
+            model.head.bias.fill_(math.log(p / (1 - p)))
+    return model
+
+
+def highlight_arrays(split: Split, mode: str) -> Dict[str, np.ndarray]:
+    """The per-scene arrays a highlight mode needs: ``reach`` ``(N, 1, H, W)`` (1 = in the
+    loss) and/or ``source`` ``(N, 3, H, W)`` (the layer's input image)."""
+    if mode not in HIGHLIGHTS:
+        raise ValueError(f"unknown highlight mode {mode!r} (available: {', '.join(HIGHLIGHTS)})")
+    out: Dict[str, np.ndarray] = {}
+    if "reach" in mode:
+        out["reach"] = reach_mask(split.aif, split.blur)
+    if "energy" in mode:
+        out["source"] = energy_source(split.aif, split.bokeh, split.blur)
+    return out
 
 
 @torch.no_grad()
@@ -94,6 +138,35 @@ def margin_px(blur: np.ndarray, crop: int) -> int:
     return int(min(math.ceil(float(blur.max())) + 1, crop // 4))
 
 
+def image_loss(
+    layer: Callable[..., torch.Tensor], loss_name: str, cfg: TrainConfig, b: Dict[str, np.ndarray], pred: torch.Tensor
+) -> Tuple[torch.Tensor, Dict[str, float]]:
+    """The self-supervised loss of one batch ``b`` (from :func:`random_crops`, with the
+    highlight mode's arrays): render ``pred`` through ``layer``, compare with the traced
+    image inside the crop's margin. Pixels clipped in the traced image are always left out
+    of L1 (as ``drbokeh dfd`` does); see ``TrainConfig.highlights`` for the rest."""
+    aif = torch.from_numpy(b["aif"])
+    source = torch.from_numpy(b["source"]) if "source" in b else aif
+    target = torch.from_numpy(b["bokeh"])
+    rendered = layer(source, pred, torch.from_numpy(b["focus"]), torch.from_numpy(b["blur"]))
+    if "source" in b:
+        rendered = rendered.clamp(max=1.0)  # the camera clips as the traced PNG is clipped
+    crop = aif.shape[-1]
+    m = margin_px(b["blur"], crop)
+    inner = (slice(None), slice(None), slice(m, crop - m), slice(m, crop - m))
+    r_in, t_in = rendered[inner], target[inner]
+    unclipped = (t_in.amax(1, keepdim=True) < 0.999).to(t_in.dtype)
+    structure_mask = None
+    if "reach" in b:
+        structure_mask = torch.from_numpy(b["reach"])[inner]
+        unclipped = unclipped * structure_mask
+    return defocus_loss(
+        r_in, t_in, pred, aif, loss_name, w_l1=cfg.w_l1, w_smooth=cfg.w_smooth,
+        w_structure=cfg.w_structure, edge_sensitivity=cfg.edge_sensitivity, mask=unclipped,
+        structure_mask=structure_mask,
+    )
+
+
 def train_run(
     spec: RunSpec,
     splits: Dict[str, Split],
@@ -104,6 +177,7 @@ def train_run(
     """Trains one run; writes ``out_dir/<name>/model.pt`` and ``log.json`` (loss curve,
     validation MAE curve, seconds per step and per epoch). The validation MAE is logged for
     the plots only; the last weights are the result (no selection on labels)."""
+    cfg = spec.config(cfg)
     torch.set_num_threads(cfg.threads)
     train, val = splits["train"], splits["val"]
     run_dir = out_dir / spec.name
@@ -113,6 +187,7 @@ def train_run(
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
     rng = np.random.default_rng(cfg.seed)
+    extra = highlight_arrays(train, cfg.highlights) if layer is not None else {}
     curve: List[Dict[str, float]] = []
     val_curve: List[Dict[str, float]] = []
     step_seconds: List[float] = []
@@ -124,7 +199,7 @@ def train_run(
             order, pos = rng.permutation(n), 0
         idx = order[pos : pos + cfg.batch]
         pos += cfg.batch
-        b = random_crops(train, idx, cfg.crop, rng)
+        b = random_crops(train, idx, cfg.crop, rng, extra)
         t0 = time.perf_counter()
         aif = torch.from_numpy(b["aif"])
         pred = model(aif)
@@ -132,17 +207,7 @@ def train_run(
             loss = (pred - torch.from_numpy(b["disparity"])).abs().mean()
             terms = {"disparity_l1": float(loss.detach())}
         else:
-            target = torch.from_numpy(b["bokeh"])
-            rendered = layer(aif, pred, torch.from_numpy(b["focus"]), torch.from_numpy(b["blur"]))
-            m = margin_px(b["blur"], cfg.crop)
-            inner = (slice(None), slice(None), slice(m, cfg.crop - m), slice(m, cfg.crop - m))
-            r_in, t_in = rendered[inner], target[inner]
-            # Pixels clipped in the traced image are left out of L1 (as drbokeh dfd does).
-            unclipped = (t_in.amax(1, keepdim=True) < 0.999).to(t_in.dtype)
-            loss, terms = defocus_loss(
-                r_in, t_in, pred, aif, spec.loss, w_l1=cfg.w_l1, w_smooth=cfg.w_smooth,
-                w_structure=cfg.w_structure, edge_sensitivity=cfg.edge_sensitivity, mask=unclipped,
-            )
+            loss, terms = image_loss(layer, spec.loss, cfg, b, pred)
         opt.zero_grad()
         loss.backward()
         opt.step()
