@@ -34,19 +34,25 @@ pub const CLIPPED_LEVEL: f64 = 254.5 / 255.0;
 
 /// How a display-encoded photo's highlights are treated ([`crate::scene::View`]); stacks,
 /// the demo and linear (EXR) photos are not touched by it.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PhotoHighlights {
     /// As the photo shows them.
     Off,
-    /// The paper's boost inside the model (docs/model.md, M20; the camera's `highlight`):
-    /// the default, the best of the settings measured in docs/highlights.md.
-    #[default]
+    /// The paper's boost inside the model (docs/model.md, M20; the camera's `highlight`).
     PaperBoost,
     /// Per-region recovery (this module).
     Recover(HighlightRecovery),
     /// Per-region recovery with each region's gain and tint estimated from its rim
-    /// ([`HighlightEstimate`]).
+    /// ([`HighlightEstimate`]), then the paper's boost: the default
+    /// ([`HighlightEstimate::DEFAULT`]), the best of the settings measured in
+    /// docs/highlights.md over both highlight ranges.
     Estimate(HighlightEstimate),
+}
+
+impl Default for PhotoHighlights {
+    fn default() -> Self {
+        PhotoHighlights::Estimate(HighlightEstimate::DEFAULT)
+    }
 }
 
 impl PhotoHighlights {
@@ -167,7 +173,8 @@ impl HighlightRecovery {
 }
 
 
-/// Per-region gain and tint estimated from the region's rim: `--highlight auto[:K[:GMAX]]`.
+/// Per-region gain and tint estimated from the region's rim: `--highlight auto` (the
+/// default for photos; `auto:KEY=VALUE,...` to change its constants).
 ///
 /// A clipped blob's edge falls from white to the background over the camera's edge
 /// spread; the brighter the source, the narrower the unclipped part of that fall (for a
@@ -178,7 +185,10 @@ impl HighlightRecovery {
 /// `g = clamp(K / x, 1, GMAX)`. The rim's colour above the background is the source's
 /// tint (it is not clipped there): clipped pixels get `g` times that tint (normalised to
 /// its largest channel; blended towards white where the rim holds little light), never
-/// less than the photo shows.
+/// less than the photo shows. Clipped pixels on the region's edge are only partly covered
+/// by the source and get the share `edge` of `g - 1`. Bright unclipped pixels of the region
+/// ramp in as in [`HighlightRecovery`], and the defocus gate applies. With `paper`, the
+/// paper's boost (docs/model.md, M20) is applied on top in the model, as for `paper`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HighlightEstimate {
     /// Rim constant `K` (> 0).
@@ -194,17 +204,22 @@ pub struct HighlightEstimate {
     pub edge: f64,
     /// Whether the paper's boost (docs/model.md, M20) is applied on top, in the model.
     pub paper: bool,
+    /// Rim light (linear, per clipped edge pixel) that weighs as much as white in the
+    /// tint: the tint fades to white where the rim holds less light than this.
+    pub white_rim: f64,
 }
 
 impl HighlightEstimate {
-    /// The defaults of `auto`.
+    /// The defaults of `auto` (and of photos), chosen on the tuning benchmarks of
+    /// docs/highlights.md (seeds 101 and 102, highlights 2-10 and 5-50).
     pub const DEFAULT: HighlightEstimate = HighlightEstimate {
-        rim_k: 0.3,
-        max_gain: 8.0,
+        rim_k: 0.4,
+        max_gain: 3.0,
         threshold: 0.9,
         tint: true,
-        edge: 1.0,
+        edge: 0.25,
         paper: true,
+        white_rim: 0.01,
     };
 
     /// Parses `auto` or `auto:KEY=VALUE,...` with keys `k` (rim constant), `max` (largest
@@ -233,6 +248,7 @@ impl HighlightEstimate {
                 "max" => e.max_gain = v,
                 "t" => e.threshold = v,
                 "edge" => e.edge = v,
+                "white" if v >= 0.0 && v.is_finite() => e.white_rim = v,
                 "tint" if v == 0.0 || v == 1.0 => e.tint = v == 1.0,
                 "paper" if v == 0.0 || v == 1.0 => e.paper = v == 1.0,
                 _ => return Err(bad()),
@@ -392,8 +408,8 @@ impl HighlightEstimate {
         let x = rim_light / edge.max(1) as f64;
         let g = (self.rim_k / x.max(1e-6)).clamp(1.0, self.max_gain);
         let tint = if self.tint {
-            // Towards white where the rim holds little light (0.05 per edge pixel).
-            let eps = 0.05 * edge.max(1) as f64;
+            // Towards white where the rim holds little light.
+            let eps = self.white_rim * edge.max(1) as f64 + 1e-12;
             let m = rim.iter().copied().fold(0.0, f64::max) + eps;
             [(rim[0] + eps) / m, (rim[1] + eps) / m, (rim[2] + eps) / m]
         } else {
@@ -634,7 +650,13 @@ mod tests {
         }
         let mut disp = Image::<f64>::new(w, h, 1);
         disp.data.iter_mut().for_each(|v| *v = 1.0);
-        let est = HighlightEstimate::DEFAULT;
+        let est = HighlightEstimate {
+            rim_k: 0.3,
+            max_gain: 8.0,
+            edge: 1.0,
+            white_rim: 0.05,
+            ..HighlightEstimate::DEFAULT
+        };
         let out = est.apply(&img, &disp, 0.0, 30.0, &tone).unwrap();
         let at = |im: &Image<f64>, x: usize, y: usize, c: usize| {
             tone.linearize(im.data[3 * (y * w + x) + c])
@@ -664,9 +686,15 @@ mod tests {
             PhotoHighlights::parse("auto").unwrap(),
             PhotoHighlights::Estimate(HighlightEstimate::DEFAULT)
         );
-        let e = HighlightEstimate::parse("auto:k=0.5,max=4,edge=0.25,tint=0").unwrap();
-        assert_eq!((e.rim_k, e.max_gain, e.edge, e.tint), (0.5, 4.0, 0.25, false));
-        for bad in ["auto:k", "auto:k=0", "auto:max=0.5", "auto:edge=2", "auto:x=1", "autox"] {
+        let e = HighlightEstimate::parse("auto:k=0.5,max=4,edge=0.5,tint=0,paper=0,white=0.1")
+            .unwrap();
+        assert_eq!(
+            (e.rim_k, e.max_gain, e.edge, e.tint, e.paper, e.white_rim),
+            (0.5, 4.0, 0.5, false, false, 0.1)
+        );
+        assert!(PhotoHighlights::parse("auto").unwrap().paper_boost());
+        assert!(!PhotoHighlights::parse("auto:paper=0").unwrap().paper_boost());
+        for bad in ["auto:k", "auto:k=0", "auto:tint=2", "auto:white=-1", "auto:max=0.5", "auto:edge=2", "auto:x=1", "autox"] {
             assert!(PhotoHighlights::parse(bad).is_err(), "{bad}");
         }
     }

@@ -304,10 +304,10 @@ fn photo_highlights_apply_to_photos_only() {
         photo_highlights,
         ..View::default()
     };
-    // Default: the paper's boost for a photo, not for a stack.
+    // Default: the rim estimate with the paper's boost for a photo, not for a stack.
     assert_eq!(
         View::default().photo_highlights,
-        PhotoHighlights::PaperBoost
+        PhotoHighlights::Estimate(drbokeh::highlight::HighlightEstimate::DEFAULT)
     );
     let s = scene::resolve(
         photo(Layering::SingleLayer),
