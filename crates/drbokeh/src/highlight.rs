@@ -172,7 +172,6 @@ impl HighlightRecovery {
     }
 }
 
-
 /// Per-region gain and tint estimated from the region's rim: `--highlight auto` (the
 /// default for photos; `auto:KEY=VALUE,...` to change its constants).
 ///
@@ -383,14 +382,16 @@ impl HighlightEstimate {
             .collect();
         for &i in &clipped {
             let (x, y) = (i % w, i / w);
-            let on_edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
-                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                nx < 0
-                    || ny < 0
-                    || nx >= w as i64
-                    || ny >= h as i64
-                    || mark[ny as usize * w + nx as usize] != clip_m
-            });
+            let on_edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|&(dx, dy)| {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    nx < 0
+                        || ny < 0
+                        || nx >= w as i64
+                        || ny >= h as i64
+                        || mark[ny as usize * w + nx as usize] != clip_m
+                });
             edge += on_edge as usize;
             for j in around(i, 1) {
                 if mark[j] != clip_m && mark[j] != rim_m {
@@ -665,16 +666,26 @@ mod tests {
         let (a, b) = (at(&out, 11, 11, 0), at(&out, 35, 11, 0));
         assert!(a > 2.0 * b, "bright-source blob {a} vs dim-source blob {b}");
         assert!(b > 1.5, "a clipped blob is recovered above white: {b}");
-        assert!((a - est.max_gain).abs() < 1e-9, "capped at the largest gain: {a}");
+        assert!(
+            (a - est.max_gain).abs() < 1e-9,
+            "capped at the largest gain: {a}"
+        );
         // B takes its rim's orange tint (red well above green, green >= blue), never
         // below the photo's white.
-        let (r, g, bl) = (at(&out, 35, 11, 0), at(&out, 35, 11, 1), at(&out, 35, 11, 2));
+        let (r, g, bl) = (
+            at(&out, 35, 11, 0),
+            at(&out, 35, 11, 1),
+            at(&out, 35, 11, 2),
+        );
         assert!(r > 1.5 * g && g >= bl && bl >= 1.0 - 1e-9, "{r} {g} {bl}");
         // The clipped edge pixels get the share `edge` of the gain.
         let half = HighlightEstimate { edge: 0.5, ..est };
         let out_half = half.apply(&img, &disp, 0.0, 30.0, &tone).unwrap();
         let edge_px = at(&out_half, 10, 10, 0);
-        assert!((edge_px - (1.0 + 0.5 * (a - 1.0))).abs() < 1e-9, "{edge_px}");
+        assert!(
+            (edge_px - (1.0 + 0.5 * (a - 1.0))).abs() < 1e-9,
+            "{edge_px}"
+        );
         assert_eq!(at(&out_half, 11, 11, 0), a);
         // The background and the unclipped rim outside the threshold are untouched.
         assert_eq!(at(&out, 0, 0, 0), at(&img, 0, 0, 0));
@@ -686,15 +697,26 @@ mod tests {
             PhotoHighlights::parse("auto").unwrap(),
             PhotoHighlights::Estimate(HighlightEstimate::DEFAULT)
         );
-        let e = HighlightEstimate::parse("auto:k=0.5,max=4,edge=0.5,tint=0,paper=0,white=0.1")
-            .unwrap();
+        let e =
+            HighlightEstimate::parse("auto:k=0.5,max=4,edge=0.5,tint=0,paper=0,white=0.1").unwrap();
         assert_eq!(
             (e.rim_k, e.max_gain, e.edge, e.tint, e.paper, e.white_rim),
             (0.5, 4.0, 0.5, false, false, 0.1)
         );
         assert!(PhotoHighlights::parse("auto").unwrap().paper_boost());
-        assert!(!PhotoHighlights::parse("auto:paper=0").unwrap().paper_boost());
-        for bad in ["auto:k", "auto:k=0", "auto:tint=2", "auto:white=-1", "auto:max=0.5", "auto:edge=2", "auto:x=1", "autox"] {
+        assert!(!PhotoHighlights::parse("auto:paper=0")
+            .unwrap()
+            .paper_boost());
+        for bad in [
+            "auto:k",
+            "auto:k=0",
+            "auto:tint=2",
+            "auto:white=-1",
+            "auto:max=0.5",
+            "auto:edge=2",
+            "auto:x=1",
+            "autox",
+        ] {
             assert!(PhotoHighlights::parse(bad).is_err(), "{bad}");
         }
     }
