@@ -77,7 +77,6 @@ impl ViewArgs<'_> {
             } else {
                 drbokeh::highlight::PhotoHighlights::default()
             },
-            ..View::default()
         })
     }
 }

@@ -113,11 +113,13 @@ fn oracle(
 ) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
     let png: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
     let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
-    let mut view = View::default();
-    view.photo_highlights = PhotoHighlights::Off;
     let cam = scene.camera();
-    view.gamma = cam.gamma;
-    view.preset = preset;
+    let view = View {
+        photo_highlights: PhotoHighlights::Off,
+        gamma: cam.gamma,
+        preset,
+        ..View::default()
+    };
     let tone = view.tone();
     let (w, h) = (png.width, png.height);
     let clipped: Vec<bool> = png
