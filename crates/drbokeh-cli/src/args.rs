@@ -99,11 +99,13 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 0.0)]
     pub offset: f64,
 
-    /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `paper`
-    /// (the paper's 1 + 0.2 m boost; plain --highlight; the default for photos), `off`, or
-    /// GAIN[:THRESHOLD] (recovery of each clipped region of a photo in linear light, e.g.
-    /// 2:0.95). Without the flag: `paper` for --image, off for stacks and the demo.
-    #[arg(long, value_name = "GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "paper")]
+    /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `auto`
+    /// (each clipped region of a photo recovered in linear light with a gain and tint
+    /// estimated from its rim, plus the paper's boost; the default for photos), `paper`
+    /// (the paper's 1 + 0.2 m boost; plain --highlight), `off`, or GAIN[:THRESHOLD] (one
+    /// gain for every clipped region, e.g. 2:0.95). Without the flag: `auto` for --image,
+    /// off for stacks and the demo.
+    #[arg(long, value_name = "auto|paper|off|GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "paper")]
     pub highlight: Option<String>,
 
     /// Aperture shape: circle, polygon:N[:DEG] (N blades rotated by DEG degrees), a name
