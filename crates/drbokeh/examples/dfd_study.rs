@@ -77,8 +77,13 @@ fn main() {
             };
             let cam = scene.camera();
             let oracle = drbokeh::baselines::flatten(&scene.layers, &cam).unwrap().0;
-            let gt = drbokeh::render(&scene.layers, &s, drbokeh::Engine::Fast, &drbokeh::NoProgress)
-                .unwrap();
+            let gt = drbokeh::render(
+                &scene.layers,
+                &s,
+                drbokeh::Engine::Fast,
+                &drbokeh::NoProgress,
+            )
+            .unwrap();
             let o = DfdOptions::new(s.clone(), RenderLayer::DrBokeh);
             let est = estimate_disparity(&scene.aif, target, &o, &mut |_| {})
                 .unwrap()
@@ -88,8 +93,9 @@ fn main() {
             println!("{} true layers: L1 {l:.4} HSSIM {hs:.4}", scene.name);
             for (an, aif) in [("png", &scene.aif), ("oracle", &oracle)] {
                 for (dn, d) in [("truth", &scene.disparity), ("est", &est)] {
-                    let single = drbokeh::dfd::render_layer(RenderLayer::DrBokeh, aif, d, &s).unwrap();
-                    let m = drbokeh::dfd::layered::LayeredModel::decompose(aif, d, &s, ml).unwrap();
+                    let single =
+                        drbokeh::dfd::render_layer(RenderLayer::DrBokeh, aif, d, &s).unwrap();
+                    let m = drbokeh::dfd::layered::LayeredModel::decompose(aif, d, ml).unwrap();
                     let lay = m.render(drbokeh::Engine::Fast, aif, d, &s).unwrap();
                     let (a, b) = lossf(&single);
                     let (c, e) = lossf(&lay);

@@ -1,11 +1,11 @@
 //! The coarse-to-fine Adam loop of [`estimate_disparity`].
 
+use super::layered::LayeredModel;
 use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
 use super::maps::{
     box_mean, dilate, encode_image, pool, pool_adjoint, to_image, upsample, weighted_median,
 };
 use super::objective::{structure_min_side, ImageObjective, SMOOTHNESS_MIN_SIDE};
-use super::layered::LayeredModel;
 use super::sweep::sweep;
 use super::{
     render_layer_on, render_layer_vjp_on, DfdOptions, DfdResult, Highlights, Init, Optimiser,
@@ -415,12 +415,7 @@ pub fn estimate_disparity<T: Real>(
             };
             if let Some(l) = layered {
                 if it % l.every == 0 {
-                    model = Some(LayeredModel::decompose(
-                        &aif,
-                        &disp_img,
-                        &settings,
-                        l.max_layers,
-                    )?);
+                    model = Some(LayeredModel::decompose(&aif, &disp_img, l.max_layers)?);
                 }
             }
             let colour_gradient = model_highlights && !clipped_idx.is_empty();
