@@ -161,14 +161,14 @@ fn dfd_occlusion_layers_are_logged_and_checked() {
     assert_eq!(log["entries"].as_array().unwrap().len(), 3);
     std::fs::remove_file(&out).unwrap();
     let o = run(&["--redecompose-every", "2"]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2)); // a usage error
     assert!(
         stderr(&o).contains("--redecompose-every") && stderr(&o).contains("--occlusion-layers"),
         "{}",
         stderr(&o)
     );
     let o = run(&["--occlusion-layers", "17"]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2)); // a usage error
     assert!(stderr(&o).contains("--occlusion-layers"), "{}", stderr(&o));
     assert!(!out.exists());
 }
