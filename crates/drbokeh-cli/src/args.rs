@@ -311,6 +311,8 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "median_sigma" => "--median-sigma",
         "min_improvement" => "--min-improvement",
         "optimiser" => "--optimiser",
+        "occlusion_layers" => "--occlusion-layers",
+        "redecompose" => "--redecompose-every",
         "param" => "--param",
         _ => return None,
     })

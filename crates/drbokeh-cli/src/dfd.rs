@@ -6,8 +6,8 @@ use clap::Args;
 use drbokeh::dfd::benchmark::{self, DfdBenchmarkConfig, DfdLayer, LossCombo, SceneGroup};
 use drbokeh::dfd::experiment::{markdown_table, paper_combos, run_experiment, synthetic_pair};
 use drbokeh::dfd::{
-    estimate_disparity, report, DfdOptions, Highlights, Init, LossWeights, MedianRefine, Optimiser,
-    Parameterisation, RenderLayer,
+    estimate_disparity, report, DfdOptions, Highlights, Init, LayeredObjective, LossWeights,
+    MedianRefine, Optimiser, Parameterisation, RenderLayer, DEFAULT_REDECOMPOSE_EVERY,
 };
 use drbokeh::{io, Preset, Progress, RenderSettings};
 use std::path::{Path, PathBuf};
@@ -75,6 +75,15 @@ pub struct OptimiserArgs {
     /// in the weighted median falls to exp(-1/2) (default 0.05).
     #[arg(long, value_name = "SIGMA")]
     pub median_sigma: Option<f64>,
+    /// Layers of the occlusion-aware objective of the drbokeh method: the all-in-focus
+    /// image is rendered as the layer stack that `render --image --disparity` makes of it
+    /// at the current estimate (the hidden background filled in behind nearer layers), at
+    /// most N layers (0 or 1: one opaque layer). GaussPSF and aperture ignore it.
+    #[arg(long, value_name = "N")]
+    pub occlusion_layers: Option<usize>,
+    /// Iterations between re-decompositions of the occlusion-aware objective.
+    #[arg(long, value_name = "N")]
+    pub redecompose_every: Option<usize>,
     /// Gamma of the display encoding.
     #[arg(long, default_value_t = 2.2)]
     pub gamma: f64,
@@ -116,6 +125,18 @@ impl OptimiserArgs {
             match o.median.as_mut() {
                 Some(m) => m.sigma = sigma,
                 None => bail!("invalid parameter --median-sigma: the median refinement is off (--median-radius 0)"),
+            }
+        }
+        if let Some(n) = self.occlusion_layers {
+            o.layered = (n > 1).then(|| LayeredObjective {
+                max_layers: n,
+                every: o.layered.map_or(DEFAULT_REDECOMPOSE_EVERY, |l| l.every),
+            });
+        }
+        if let Some(every) = self.redecompose_every {
+            match o.layered.as_mut() {
+                Some(l) => l.every = every,
+                None => bail!("invalid parameter --redecompose-every: the occlusion-aware objective is off (--occlusion-layers 1)"),
             }
         }
         o.settings.camera.gamma = self.gamma;
