@@ -282,5 +282,4 @@ impl<'a, T: Real> DiscGather<'a, T> {
         }
         profile.weight = weight;
     }
-
 }
