@@ -52,8 +52,8 @@ pub(crate) fn png_rows<T: Real, W: Write>(
         png::BitDepth::Eight
     });
     // zlib level 3 with adaptive filters: about 10% larger files than the `image` crate's
-    // default (level 6), for about a third of its time, which is serial after the render
-    // (0.17 s per megapixel at level 6; /work/data/speed notes, issue 18).
+    // default (level 6), in a fraction of its time, which is serial after the render (level
+    // 6 took about 0.17 s per megapixel of RGB on the issue 18 workloads).
     enc.set_deflate_compression(png::DeflateCompression::Level(PNG_LEVEL));
     enc.set_filter(png::Filter::Adaptive);
     let mut writer = enc.write_header().map_err(fail)?;

@@ -64,6 +64,9 @@ pub(super) struct DiscGather<'a, T> {
     profile: RefCell<GatherProfile<T>>,
 }
 
+/// Columns `lo ..= hi` relative to the receiver.
+type Run = (isize, isize);
+
 /// One coverage disc of radius `r_c` as the gather walks it: per row its offset, interior
 /// and ring chunks; the chunks' steps; and the weight `sum S` (which does not depend on
 /// alpha). A function of `r_c` (and the band's fixed shape, rings and window) only, so
@@ -71,7 +74,7 @@ pub(super) struct DiscGather<'a, T> {
 struct GatherProfile<T> {
     r_c: Option<T>,
     /// `(dy, interior, first chunk, end chunk)` per row with taps.
-    rows: Vec<(isize, Option<(isize, isize)>, usize, usize)>,
+    rows: Vec<(isize, Option<Run>, usize, usize)>,
     /// Column offset of each ring chunk.
     chunk_dx: Vec<isize>,
     /// Steps of each ring chunk.
