@@ -101,7 +101,7 @@ fn spans_match_fast_with_focus_and_blur_side_by_side() {
 /// Layers whose radii repeat, where sources (and coverage receivers) of equal radius share
 /// one disc profile: a soft-edged front at constant disparity over a background that is
 /// constant along rows, and a layer alternating between a large and a small radius column
-/// by column (runs of equal radius broken by sources that do not reach the row).
+/// by column (sources of equal radius separated by sources that do not reach the row).
 fn repeated_radii(w: usize, h: usize) -> LayerStack<f32> {
     let mut front = Layer::<f32>::constant(w, h, [0.9, 0.4, 0.1], 0.0, 0.8);
     let mut mid = Layer::<f32>::constant(w, h, [0.2, 0.7, 0.3], 0.0, 0.5);

@@ -349,28 +349,6 @@ pub fn ring_steps<T: Real, const SHARP: bool>(
     s
 }
 
-/// [`ring_steps`] of a chunk that lies inside the window (`|dx0| ..= |dx0| + LANES - 1`
-/// within the row's half-width, every mask 1): the same values, without the mask.
-#[inline(always)]
-pub fn ring_steps_inside<T: Real, const SHARP: bool>(
-    table: &GaugeTable<T>,
-    r: T,
-    dy: isize,
-    dx0: isize,
-) -> [T; LANES] {
-    let g = table.chunk(dy, dx0);
-    let mut s = [T::zero(); LANES];
-    for l in 0..LANES {
-        let u = (r - g[l]).max(T::c(STEP_ARGUMENT_MIN));
-        s[l] = if SHARP {
-            model::sharp_step_fast(u)
-        } else {
-            model::soft_step_fast(u)
-        };
-    }
-    s
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -428,26 +406,6 @@ mod tests {
                             }
                         }
                     }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn ring_steps_inside_the_window_match_the_masked_steps() {
-        let table = GaugeTable::<f32>::new(&Aperture::Circle, 20, -1);
-        for dy in -20isize..=20 {
-            let Some(hw) = table.window_half_width(dy) else {
-                continue;
-            };
-            for dx0 in 0..=(hw as isize + 1 - LANES as isize) {
-                for r in [0.3f32, 4.0, 11.7, 19.2] {
-                    let a = ring_steps::<f32, true>(&table, r, dy, dx0);
-                    let b = ring_steps_inside::<f32, true>(&table, r, dy, dx0);
-                    assert_eq!(a, b, "dy {dy} dx0 {dx0} r {r}");
-                    let a = ring_steps::<f32, false>(&table, r, dy, dx0);
-                    let b = ring_steps_inside::<f32, false>(&table, r, dy, dx0);
-                    assert_eq!(a, b, "dy {dy} dx0 {dx0} r {r}");
                 }
             }
         }

@@ -18,7 +18,7 @@
 //!
 //! **Shared profiles.** A disc row's intervals and ring steps depend only on the radius,
 //! the row offset and the window, so consecutive sources of equal radius share one
-//! evaluated profile (and are walked as one run), and coverage receivers of equal coverage
+//! evaluated profile, and coverage receivers of equal coverage
 //! radius share one gathered disc: exact (the same values summed in the same order), and
 //! the common case in layers of constant or row-constant disparity.
 //!

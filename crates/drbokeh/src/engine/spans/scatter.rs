@@ -11,8 +11,7 @@
 use super::coverage::CoverageCtx;
 use super::focus::{classify, Nodes, StepClass, FOCUS_CUTOFF, MAX_NODES};
 use super::geometry::{
-    disc_row, floor_sqrt, ring_steps, ring_steps_inside, DiscRow, GaugeTable, Rings, Shape, LANES,
-    MARGIN,
+    disc_row, floor_sqrt, ring_steps, DiscRow, GaugeTable, Rings, Shape, LANES, MARGIN,
 };
 use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
@@ -412,10 +411,9 @@ fn in_run(c: isize, (_, last, step): (isize, isize, isize)) -> bool {
 struct Profiles<T> {
     /// Steps, each source's run of chunks followed by [`LANES`] zeros.
     values: Vec<T>,
-    /// Per run of consecutive sources `i0 .. i1` of equal radius with a row here: the
-    /// run, its row intervals and the offset of `|dx| = 0` (`dx = 0` for rows without an
-    /// interior, whose profile is stored mirrored).
-    entries: Vec<(usize, usize, DiscRow, isize)>,
+    /// Per source with a row here: its index, row intervals and the offset of `|dx| = 0`
+    /// (`dx = 0` for rows without an interior, whose profile is stored mirrored).
+    entries: Vec<(usize, DiscRow, isize)>,
 }
 
 /// Rows `dy = +-ady` (`rows`: their sub-band rows, where in the sub-band) of every source
@@ -457,13 +455,8 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
         }
         if let Some((r, e)) = last {
             if src.r == r {
-                let (_, i1, disc, base) = profiles.entries[e];
-                if i1 == i {
-                    profiles.entries[e].1 = i + 1;
-                } else {
-                    last = Some((r, profiles.entries.len()));
-                    profiles.entries.push((i, i + 1, disc, base));
-                }
+                let (_, disc, base) = profiles.entries[e];
+                profiles.entries.push((i, disc, base));
                 continue;
             }
         }
@@ -479,11 +472,7 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
         let n = (outer_hi + 1 - k0).max(0) as usize;
         let mut k = k0;
         while k <= outer_hi {
-            let s = if k + lanes - 1 <= hw as isize {
-                ring_steps_inside::<T, SHARP>(ctx.table, src.r, ady, k)
-            } else {
-                ring_steps::<T, SHARP>(ctx.table, src.r, ady, k)
-            };
+            let s = ring_steps::<T, SHARP>(ctx.table, src.r, ady, k);
             let at = next + (k - k0) as usize;
             values[at..at + LANES].copy_from_slice(&s);
             k += lanes;
@@ -500,10 +489,10 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
             for kk in 1..n {
                 values[centre - kk] = values[next + kk];
             }
-            profiles.entries.push((i, i + 1, disc, centre as isize));
+            profiles.entries.push((i, disc, centre as isize));
             next = centre + n + LANES;
         } else {
-            profiles.entries.push((i, i + 1, disc, next as isize - k0));
+            profiles.entries.push((i, disc, next as isize - k0));
             next += n + LANES;
         }
     }
@@ -511,69 +500,60 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     let values = &profiles.values;
     let w = ctx.width as isize;
     let mut work = 0;
-    for &(i0, i1, disc, base) in &profiles.entries {
+    for &(i, disc, base) in &profiles.entries {
+        let (src, cache) = (&sources[i], &mut caches[i]);
+        if let Some(run) = disc.interior {
+            for row in rows.into_iter().flatten() {
+                work += interior::<T, FOCUS>(ctx, src, run, row, acc, cache);
+            }
+        }
         // The common row: an interior, a ring of at most one chunk on each side (its
         // profile then holds zeros beyond the ring's end), both chunks within the
-        // accumulators' margins: two chunks per row, no runs. Decided once per run.
-        let one_chunk = match (disc.interior, disc.right) {
-            (Some((_, hi)), Some((_, outer_hi))) => {
-                let k0 = hi + 1;
-                (outer_hi - k0 < lanes && disc.left == Some((-outer_hi, -k0))).then(|| {
-                    let at = (base + k0) as usize;
-                    let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                    let left: [T; LANES] = std::array::from_fn(|l| right[LANES - 1 - l]);
-                    (k0, right, left)
-                })
-            }
-            _ => None,
-        };
-        for i in i0..i1 {
-            let (src, cache) = (&sources[i], &mut caches[i]);
-            if let Some(run) = disc.interior {
+        // accumulators' margins: two chunks per row, no runs.
+        if let (Some((_, hi)), Some(_)) = (disc.interior, disc.right) {
+            let k0 = hi + 1;
+            let outer_hi = disc.right.map_or(hi, |(_, o)| o);
+            let one_chunk = outer_hi - k0 < lanes && disc.left == Some((-outer_hi, -k0));
+            if one_chunk && src.xs >= k0 && src.xs + k0 <= w {
+                let at = (base + k0) as usize;
+                let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                let left: [T; LANES] = std::array::from_fn(|l| right[LANES - 1 - l]);
                 for row in rows.into_iter().flatten() {
-                    work += interior::<T, FOCUS>(ctx, src, run, row, acc, cache);
+                    ring_add::<T, FOCUS>(ctx, src, row, src.xs + k0, right, acc, cache);
+                    ring_add::<T, FOCUS>(
+                        ctx,
+                        src,
+                        row,
+                        src.xs - k0 - (lanes - 1),
+                        left,
+                        acc,
+                        cache,
+                    );
+                    work += 2 * LANES as u64;
                 }
+                continue;
             }
-            if let Some((k0, right, left)) = one_chunk {
-                if src.xs >= k0 && src.xs + k0 <= w {
-                    for row in rows.into_iter().flatten() {
-                        ring_add::<T, FOCUS>(ctx, src, row, src.xs + k0, right, acc, cache);
-                        ring_add::<T, FOCUS>(
-                            ctx,
-                            src,
-                            row,
-                            src.xs - k0 - (lanes - 1),
-                            left,
-                            acc,
-                            cache,
-                        );
-                        work += 2 * LANES as u64;
-                    }
-                    continue;
-                }
-            }
-            let runs = chunk_runs(&disc, src.xs, w);
-            for row in rows.into_iter().flatten() {
-                for run in runs {
-                    let mut start = run.0;
-                    while in_run(start, run) {
-                        let dx0 = start - src.xs;
-                        let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
-                            // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
-                            // One vector load, then reversed in registers (indexing the slice
-                            // backwards compiles to eight scalar loads).
-                            let at = (base - (dx0 + lanes - 1)) as usize;
-                            let half: [T; LANES] =
-                                values[at..at + LANES].try_into().expect("LANES");
-                            std::array::from_fn(|l| half[LANES - 1 - l])
-                        } else {
-                            let at = (base + dx0) as usize;
-                            values[at..at + LANES].try_into().expect("LANES")
-                        };
-                        ring_add::<T, FOCUS>(ctx, src, row, start, s, acc, cache);
-                        work += LANES as u64;
-                        start += run.2;
-                    }
+        }
+        let runs = chunk_runs(&disc, src.xs, w);
+        for row in rows.into_iter().flatten() {
+            for run in runs {
+                let mut start = run.0;
+                while in_run(start, run) {
+                    let dx0 = start - src.xs;
+                    let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
+                        // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
+                        // One vector load, then reversed in registers (indexing the slice
+                        // backwards compiles to eight scalar loads).
+                        let at = (base - (dx0 + lanes - 1)) as usize;
+                        let half: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                        std::array::from_fn(|l| half[LANES - 1 - l])
+                    } else {
+                        let at = (base + dx0) as usize;
+                        values[at..at + LANES].try_into().expect("LANES")
+                    };
+                    ring_add::<T, FOCUS>(ctx, src, row, start, s, acc, cache);
+                    work += LANES as u64;
+                    start += run.2;
                 }
             }
         }
