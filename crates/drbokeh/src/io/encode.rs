@@ -19,12 +19,15 @@ pub(crate) fn quantize_u16(v: f64) -> u16 {
     (v.clamp(0.0, 1.0) * 65535.0).round() as u16
 }
 
+/// The zlib level of written PNGs (1 fastest .. 9 smallest).
+const PNG_LEVEL: u8 = 3;
+
 /// Bytes of compressed data per PNG `IDAT` chunk.
 const PNG_CHUNK_BYTES: usize = 1 << 18;
 
 /// Writes `image` (1 or 3 channels) as PNG to `out`, row by row: each value `v` becomes
-/// `round(clamp(v, 0, 1) x 255)` (or x 65535 for 16 bits). Compression and filters as the
-/// `image` crate's defaults (balanced, adaptive).
+/// `round(clamp(v, 0, 1) x 255)` (or x 65535 for 16 bits). Adaptive filters, zlib level
+/// [`PNG_LEVEL`].
 pub(crate) fn png_rows<T: Real, W: Write>(
     path: &Path,
     out: W,
@@ -48,7 +51,10 @@ pub(crate) fn png_rows<T: Real, W: Write>(
     } else {
         png::BitDepth::Eight
     });
-    enc.set_compression(png::Compression::Balanced);
+    // zlib level 3 with adaptive filters: about 10% larger files than the `image` crate's
+    // default (level 6), in a fraction of its time, which is serial after the render (level
+    // 6 took about 0.17 s per megapixel of RGB on the issue 18 workloads).
+    enc.set_deflate_compression(png::DeflateCompression::Level(PNG_LEVEL));
     enc.set_filter(png::Filter::Adaptive);
     let mut writer = enc.write_header().map_err(fail)?;
     let mut stream = writer
