@@ -69,6 +69,15 @@ impl<T: Real> LayeredModel<T> {
         })
     }
 
+    /// The one-layer model: `aif` as a single opaque layer at `disparity`, every pixel its
+    /// own (the plain Dr.Bokeh layer of [`super::RenderLayer::DrBokeh`]).
+    pub fn single(aif: &Image<T>, disparity: &Image<T>) -> Result<Self> {
+        Ok(LayeredModel {
+            stack: LayerStack::single(aif.clone(), disparity.clone())?,
+            owner: vec![0; aif.width * aif.height],
+        })
+    }
+
     /// Number of layers.
     pub fn layer_count(&self) -> usize {
         self.stack.layers.len()

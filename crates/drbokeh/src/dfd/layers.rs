@@ -3,16 +3,16 @@
 //! `sum(G * render)` with respect to that disparity (and, on request, the colour).
 //!
 //! - [`RenderLayer::DrBokeh`]: our renderer on a single opaque layer, with the settings'
-//!   preset (`physical` or `paper`), through the public [`crate::render_with_tape_on`] and
-//!   [`crate::Tape::backward`].
+//!   preset (`physical` or `paper`): the one-layer [`super::layered::LayeredModel`], which
+//!   renders through the public [`crate::render_with_tape_on`] and [`crate::Tape::backward`].
 //! - [`RenderLayer::GaussPsf`]: the Gaussian-PSF layer, [`crate::baselines::gauss_psf`].
 //! - [`RenderLayer::Aperture`]: aperture compositing, [`crate::baselines::aperture_compositing`].
 
+use super::layered::LayeredModel;
 use crate::baselines::{aperture_compositing, gauss_psf, LayerVjp};
 use crate::image::Image;
 use crate::presets::RenderSettings;
-use crate::stack::LayerStack;
-use crate::{Engine, Error, NoProgress, Real, Result};
+use crate::{Engine, Error, Real, Result};
 
 /// Which rendering layer to optimise through.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -80,8 +80,7 @@ pub fn render_layer_on<T: Real>(
 ) -> Result<Image<T>> {
     match layer {
         RenderLayer::DrBokeh => {
-            let stack = LayerStack::single(aif.clone(), disparity.clone())?;
-            crate::render(&stack, settings, engine, &NoProgress)
+            LayeredModel::single(aif, disparity)?.render(engine, aif, disparity, settings)
         }
         RenderLayer::GaussPsf => gauss_psf::render(aif, disparity, settings),
         RenderLayer::Aperture => aperture_compositing::render(aif, disparity, settings),
@@ -123,22 +122,14 @@ pub fn render_layer_vjp_on<T: Real>(
     upstream: impl FnOnce(&Image<T>) -> Result<Image<T>>,
 ) -> Result<LayerVjp<T>> {
     match layer {
-        RenderLayer::DrBokeh => {
-            let stack = LayerStack::single(aif.clone(), disparity.clone())?;
-            let (render, tape) = crate::render_with_tape_on(&stack, settings, engine, &NoProgress)?;
-            let g = upstream(&render)?;
-            let grads = tape.backward(&g, &NoProgress)?;
-            let layer = grads
-                .layers
-                .into_iter()
-                .next()
-                .ok_or_else(|| Error::input("render", "no layer gradient"))?;
-            Ok(LayerVjp {
-                render,
-                d_disparity: layer.disparity,
-                d_rgb: colour_gradient.then_some(layer.rgb),
-            })
-        }
+        RenderLayer::DrBokeh => LayeredModel::single(aif, disparity)?.vjp(
+            engine,
+            aif,
+            disparity,
+            settings,
+            colour_gradient,
+            upstream,
+        ),
         RenderLayer::GaussPsf => {
             gauss_psf::render_vjp(aif, disparity, settings, colour_gradient, upstream)
         }
