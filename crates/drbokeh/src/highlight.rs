@@ -161,7 +161,7 @@ impl HighlightRecovery {
             blur_k,
             tone,
             self.threshold,
-            1.0,
+            &Profile::FLAT,
             &mut out,
             |region, _value| {
                 let weight = (a_point / region.len() as f64).min(1.0);
@@ -206,6 +206,23 @@ pub struct HighlightEstimate {
     /// Rim light (linear, per clipped edge pixel) that weighs as much as white in the
     /// tint: the tint fades to white where the rim holds less light than this.
     pub white_rim: f64,
+    /// Share of `g - 1` on clipped pixels two 4-steps from an unclipped pixel.
+    pub inner: f64,
+    /// Share on the clipped pixels of a region that are all on its edge (`None`: `edge`).
+    pub core: Option<f64>,
+    /// Whether the unclipped channels of clipped pixels keep their value.
+    pub keep: bool,
+    /// Scale of the ramp on the region's bright unclipped pixels, in [0, 1].
+    pub rim_ramp: f64,
+    /// With `Some(p)`, clipped edge pixels get the gain `g^p` instead of the share `edge`.
+    pub edge_power: Option<f64>,
+    /// Gain offset `B` of the rim rule `g = clamp(B + K / x, 1, GMAX)` (>= 0).
+    pub base_gain: f64,
+    /// Whether the rim cue `x` is the rim's light per rim pixel above the median of the
+    /// next ring out (else per clipped edge pixel above the 3-4 px ring).
+    pub ring_cue: bool,
+    /// Whether the tint weighs each rim pixel by its light above the next ring.
+    pub tint_weighted: bool,
 }
 
 impl HighlightEstimate {
@@ -219,6 +236,14 @@ impl HighlightEstimate {
         edge: 0.25,
         paper: true,
         white_rim: 0.01,
+        inner: 1.0,
+        core: None,
+        keep: false,
+        rim_ramp: 1.0,
+        edge_power: None,
+        base_gain: 0.0,
+        ring_cue: false,
+        tint_weighted: false,
     };
 
     /// Parses `auto` or `auto:KEY=VALUE,...` with keys `k` (rim constant), `max` (largest
@@ -250,6 +275,14 @@ impl HighlightEstimate {
                 "white" if v >= 0.0 && v.is_finite() => e.white_rim = v,
                 "tint" if v == 0.0 || v == 1.0 => e.tint = v == 1.0,
                 "paper" if v == 0.0 || v == 1.0 => e.paper = v == 1.0,
+                "inner" => e.inner = v,
+                "core" => e.core = Some(v),
+                "keep" if v == 0.0 || v == 1.0 => e.keep = v == 1.0,
+                "rimramp" => e.rim_ramp = v,
+                "tintw" if v == 0.0 || v == 1.0 => e.tint_weighted = v == 1.0,
+                "cue" if v == 0.0 || v == 1.0 => e.ring_cue = v == 1.0,
+                "base" if (0.0..=100.0).contains(&v) => e.base_gain = v,
+                "edgep" if (0.0..=1.0).contains(&v) => e.edge_power = Some(v),
                 _ => return Err(bad()),
             }
         }
@@ -265,11 +298,18 @@ impl HighlightEstimate {
                 format!("the rim constant must be in (0, 1000], got {}", self.rim_k),
             ));
         }
-        if !(0.0..=1.0).contains(&self.edge) {
-            return Err(Error::param(
-                "highlight",
-                format!("the edge share must be in [0, 1], got {}", self.edge),
-            ));
+        for (name, v) in [
+            ("edge", self.edge),
+            ("inner", self.inner),
+            ("core", self.core.unwrap_or(self.edge)),
+            ("rimramp", self.rim_ramp),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(Error::param(
+                    "highlight",
+                    format!("the {name} share must be in [0, 1], got {v}"),
+                ));
+            }
         }
         HighlightRecovery {
             gain: self.max_gain,
@@ -310,10 +350,17 @@ impl HighlightEstimate {
             blur_k,
             tone,
             self.threshold,
-            self.edge,
+            &Profile {
+                edge: self.edge,
+                inner: self.inner,
+                core: self.core.unwrap_or(self.edge),
+                keep: self.keep,
+                rim_ramp: self.rim_ramp,
+                edge_power: self.edge_power,
+            },
             &mut out,
             |region, value| {
-                stamp += 4;
+                stamp += 5;
                 let (g, tint) = est.estimate(region, value, &lin, w, h, &mut mark, stamp);
                 (g, Some(tint))
             },
@@ -334,7 +381,8 @@ impl HighlightEstimate {
         mark: &mut [u32],
         stamp: u32,
     ) -> (f64, [f64; 3]) {
-        let (far_m, near_m, clip_m, rim_m) = (stamp, stamp + 1, stamp + 2, stamp + 3);
+        let (far_m, near_m, clip_m, rim_m, next_m) =
+            (stamp, stamp + 1, stamp + 2, stamp + 3, stamp + 4);
         let around = |i: usize, r: usize| {
             let (x, y) = (i % w, i / w);
             let ys = y.saturating_sub(r)..=(y + r).min(h - 1);
@@ -406,8 +454,51 @@ impl HighlightEstimate {
             }
         }
         let rim_light = (rim[0] + rim[1] + rim[2]) / 3.0;
-        let x = rim_light / edge.max(1) as f64;
-        let g = (self.rim_k / x.max(1e-6)).clamp(1.0, self.max_gain);
+        // The next ring out (2 px from the clipped pixels): a background estimate closer
+        // to the rim than the 3-4 px ring.
+        let mut next = Vec::new();
+        for &i in &clipped {
+            for j in around(i, 2) {
+                if mark[j] != clip_m && mark[j] != rim_m && mark[j] != next_m {
+                    next.push(j);
+                    mark[j] = next_m;
+                }
+            }
+        }
+        let mut bg_next = [0.0; 3];
+        for (c, b) in bg_next.iter_mut().enumerate() {
+            let mut v: Vec<f64> = next.iter().map(|&j| lin[3 * j + c]).collect();
+            v.sort_by(f64::total_cmp);
+            *b = v.get(v.len() / 2).copied().unwrap_or(bg[c]);
+        }
+        let lift_of = |j: usize, c: usize| (lin[3 * j + c] - bg_next[c]).max(0.0);
+        let lifts: Vec<f64> = rim_seen
+            .iter()
+            .map(|&j| (0..3).map(|c| lift_of(j, c)).sum::<f64>() / 3.0)
+            .collect();
+        let x = if self.ring_cue {
+            // The rim's light per rim pixel above the next ring.
+            lifts.iter().sum::<f64>() / rim_seen.len().max(1) as f64
+        } else {
+            rim_light / edge.max(1) as f64
+        };
+        if self.tint_weighted {
+            // Each rim pixel's colour above the next ring, weighted by its lift: the
+            // brightest rim pixels carry the source's colour, the rest mostly background.
+            let wsum: f64 = lifts.iter().sum();
+            if wsum > 0.0 {
+                for (c, r) in rim.iter_mut().enumerate() {
+                    let m: f64 = rim_seen
+                        .iter()
+                        .zip(&lifts)
+                        .map(|(&j, &wj)| wj * lift_of(j, c))
+                        .sum::<f64>()
+                        / wsum;
+                    *r = m * rim_seen.len() as f64;
+                }
+            }
+        }
+        let g = (self.base_gain + self.rim_k / x.max(1e-6)).clamp(1.0, self.max_gain);
         let tint = if self.tint {
             // Towards white where the rim holds little light.
             let eps = self.white_rim * edge.max(1) as f64 + 1e-12;
@@ -451,7 +542,7 @@ fn recover_regions<T: Real>(
     blur_k: f64,
     tone: &Tone,
     t0: f64,
-    edge_share: f64,
+    profile: &Profile,
     out: &mut Image<T>,
     mut gain_of: impl FnMut(&[usize], &[f64]) -> (f64, Option<[f64; 3]>),
 ) {
@@ -489,27 +580,68 @@ fn recover_regions<T: Real>(
             continue;
         }
         let (g_region, tint) = gain_of(&region, &value);
-        for &i in &region {
-            let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
+        let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
+        // 4-neighbour steps from the nearest unclipped pixel: 1 on the clipped edge, 2 one
+        // pixel further in, 3 for everything deeper.
+        let depth = |i: usize| -> u8 {
             let (x, y) = (i % w, i / w);
-            let on_edge = clipped(i)
-                && (x == 0
-                    || y == 0
-                    || x + 1 == w
-                    || y + 1 == h
-                    || !clipped(i - 1)
-                    || !clipped(i + 1)
-                    || !clipped(i - w)
-                    || !clipped(i + w));
-            let g = if on_edge {
-                1.0 + (g_region - 1.0) * edge_share
+            let ring = |r: usize| {
+                x < r
+                    || y < r
+                    || x + r >= w
+                    || y + r >= h
+                    || (1..=r).any(|s| {
+                        (0..=s).any(|a| {
+                            let b = s - a;
+                            [
+                                (a as i64, b as i64),
+                                (-(a as i64), b as i64),
+                                (a as i64, -(b as i64)),
+                                (-(a as i64), -(b as i64)),
+                            ]
+                            .iter()
+                            .any(|&(dx, dy)| {
+                                !clipped(((y as i64 + dy) as usize) * w + (x as i64 + dx) as usize)
+                            })
+                        })
+                    })
+            };
+            if ring(1) {
+                1
+            } else if ring(2) {
+                2
             } else {
-                g_region
+                3
+            }
+        };
+        let depths: Vec<u8> = region
+            .iter()
+            .map(|&i| if clipped(i) { depth(i) } else { 0 })
+            .collect();
+        let all_edge = depths.iter().all(|&d| d <= 1);
+        for (&i, &d) in region.iter().zip(&depths) {
+            let share = match d {
+                0 => 1.0,
+                1 if all_edge => profile.core,
+                1 => profile.edge,
+                2 => profile.inner,
+                _ => 1.0,
+            };
+            let g = match profile.edge_power {
+                Some(p) if d == 1 => g_region.powf(p),
+                _ => 1.0 + (g_region - 1.0) * share,
             };
             let t = ((value[i] - t0) / (1.0 - t0)).clamp(0.0, 1.0);
             let radius_px = blur_k * (disparity.data[i].f64() - focus_disparity).abs();
-            let ramp = smoothstep(t) * defocus_gate(radius_px);
+            let mut ramp = smoothstep(t) * defocus_gate(radius_px);
+            if d == 0 {
+                ramp *= profile.rim_ramp;
+            }
             for (c, v) in out.data[3 * i..3 * i + 3].iter_mut().enumerate() {
+                if profile.keep && d > 0 && v.f64() < CLIPPED_LEVEL {
+                    // An unclipped channel of a clipped pixel is what the scene showed.
+                    continue;
+                }
                 let lin = tone.linearize(v.f64().max(0.0));
                 let new = match tint {
                     // The gain on every channel: the hue is kept.
@@ -521,6 +653,34 @@ fn recover_regions<T: Real>(
             }
         }
     }
+}
+
+/// How a region's gain is spread over its pixels ([`recover_regions`]).
+struct Profile {
+    /// Share of `g - 1` on clipped pixels with an unclipped 4-neighbour.
+    edge: f64,
+    /// Share on clipped pixels two 4-steps from an unclipped pixel.
+    inner: f64,
+    /// Share on the clipped pixels of a region that are all on its edge (a small blob).
+    core: f64,
+    /// Unclipped channels of clipped pixels keep their value.
+    keep: bool,
+    /// Scale of the ramp on the region's unclipped (bright) pixels.
+    rim_ramp: f64,
+    /// With `Some(p)`, clipped edge pixels get the gain `g^p` instead of the share `edge`.
+    edge_power: Option<f64>,
+}
+
+impl Profile {
+    /// The gain on every pixel of the region.
+    const FLAT: Profile = Profile {
+        edge: 1.0,
+        inner: 1.0,
+        core: 1.0,
+        keep: false,
+        rim_ramp: 1.0,
+        edge_power: None,
+    };
 }
 
 /// `s(t) = t^2 (3 - 2t)` for `t` in [0, 1].
