@@ -161,7 +161,7 @@ impl HighlightRecovery {
             blur_k,
             tone,
             self.threshold,
-            1.0,
+            &Profile::FLAT,
             &mut out,
             |region, _value| {
                 let weight = (a_point / region.len() as f64).min(1.0);
@@ -178,16 +178,21 @@ impl HighlightRecovery {
 /// A clipped blob's edge falls from white to the background over the camera's edge
 /// spread; the brighter the source, the narrower the unclipped part of that fall (for a
 /// linear ramp of one pixel and a source `g` times white, the unclipped rim holds
-/// `1 / (2 g)` of light per unit of edge length). So with `x` the region's rim light (the
-/// unclipped pixels touching its clipped ones, linear, above the local background: the
-/// median of the ring 3-4 px out) per clipped edge pixel, the region's gain is
-/// `g = clamp(K / x, 1, GMAX)`. The rim's colour above the background is the source's
-/// tint (it is not clipped there): clipped pixels get `g` times that tint (normalised to
-/// its largest channel; blended towards white where the rim holds little light), never
-/// less than the photo shows. Clipped pixels on the region's edge are only partly covered
-/// by the source and get the share `edge` of `g - 1`. Bright unclipped pixels of the region
-/// ramp in as in [`HighlightRecovery`], and the defocus gate applies. With `paper`, the
-/// paper's boost (docs/model.md, M20) is applied on top in the model, as for `paper`.
+/// `1 / (2 g)` of light per unit of edge length). So with `x` the region's rim cue, the
+/// region's gain is `g = clamp(K / x, 1, GMAX)`. The default cue (`ring_cue`) is the rim's
+/// light (its unclipped pixels 8-touching a clipped one, linear) above the local
+/// background, the per-channel median of the next ring out (2 px from the clipped
+/// pixels), per rim pixel; the older cue is that light above the median of the ring
+/// 3-4 px out, per clipped edge pixel. The rim's colour above the background is the
+/// source's tint (it is not clipped there), each rim pixel weighted by its light
+/// (`tint_weighted`): clipped pixels get `g` times that tint (normalised to its largest
+/// channel; blended towards white where the rim holds little light), never less than the
+/// photo shows. Profile: interior clipped pixels get `g`; clipped pixels on the region's
+/// edge are only partly covered by the source and get `g^p` (`edge_power`; or the share
+/// `edge` of `g - 1`). Channels that did not clip keep their value (`keep`), and so do the
+/// region's bright unclipped pixels (`rim_ramp` 0; else they ramp in as in
+/// [`HighlightRecovery`]). The defocus gate applies. With `paper`, the paper's boost
+/// (docs/model.md, M20) is applied on top in the model, as for `paper`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HighlightEstimate {
     /// Rim constant `K` (> 0).
@@ -206,30 +211,50 @@ pub struct HighlightEstimate {
     /// Rim light (linear, per clipped edge pixel) that weighs as much as white in the
     /// tint: the tint fades to white where the rim holds less light than this.
     pub white_rim: f64,
+    /// Whether the unclipped channels of clipped pixels keep their value (they are what
+    /// the scene showed; a tinted source often clips in one channel only).
+    pub keep: bool,
+    /// Share of the ramp `s(t)` that the region's bright *unclipped* pixels get, in [0, 1]
+    /// (0: they keep their value).
+    pub rim_ramp: f64,
+    /// With `Some(p)`, clipped edge pixels get the gain `g^p` (the profile of a source
+    /// partly covering them) instead of the share `edge` of `g - 1`.
+    pub edge_power: Option<f64>,
+    /// Whether the rim cue `x` is the rim's light per rim pixel above the median of the
+    /// next ring out (the ring cue), else per clipped edge pixel above the 3-4 px ring.
+    pub ring_cue: bool,
+    /// Whether the tint weighs each rim pixel by its light above the next ring.
+    pub tint_weighted: bool,
 }
 
 impl HighlightEstimate {
     /// The defaults of `auto` (and of photos), chosen on the tuning benchmarks of
     /// docs/highlights.md (seeds 101 and 102, highlights 2-10 and 5-50).
     pub const DEFAULT: HighlightEstimate = HighlightEstimate {
-        rim_k: 0.4,
-        max_gain: 3.0,
+        rim_k: 0.2,
+        max_gain: 3.5,
         threshold: 0.9,
         tint: true,
         edge: 0.25,
         paper: true,
         white_rim: 0.01,
+        keep: true,
+        rim_ramp: 0.0,
+        edge_power: Some(0.65),
+        ring_cue: true,
+        tint_weighted: true,
     };
 
     /// Parses `auto` or `auto:KEY=VALUE,...` with keys `k` (rim constant), `max` (largest
-    /// gain), `t` (threshold), `edge` (share of the gain on the clipped edge pixels), `tint`
-    /// (0 or 1), `paper` (0 or 1).
+    /// gain), `t` (threshold), `edgep` (power of the gain on the clipped edge pixels),
+    /// `edge` (share of `g - 1` on them instead), `white`, `tint`, `paper`, `keep`, `cue`,
+    /// `tintw` (0 or 1) and `rim` (share of the ramp on bright unclipped pixels).
     pub fn parse(spec: &str) -> Result<Self> {
         let bad = || {
             Error::param(
                 "highlight",
                 format!(
-                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edge, tint, paper; e.g. auto:k=0.3,max=8), got '{spec}'"
+                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edgep, edge, white, tint, paper, keep, cue, tintw, rim; e.g. auto:k=0.3,max=8), got '{spec}'"
                 ),
             )
         };
@@ -246,10 +271,18 @@ impl HighlightEstimate {
                 "k" => e.rim_k = v,
                 "max" => e.max_gain = v,
                 "t" => e.threshold = v,
-                "edge" => e.edge = v,
+                "edge" => {
+                    e.edge = v;
+                    e.edge_power = None;
+                }
                 "white" if v >= 0.0 && v.is_finite() => e.white_rim = v,
                 "tint" if v == 0.0 || v == 1.0 => e.tint = v == 1.0,
                 "paper" if v == 0.0 || v == 1.0 => e.paper = v == 1.0,
+                "keep" if v == 0.0 || v == 1.0 => e.keep = v == 1.0,
+                "rim" => e.rim_ramp = v,
+                "tintw" if v == 0.0 || v == 1.0 => e.tint_weighted = v == 1.0,
+                "cue" if v == 0.0 || v == 1.0 => e.ring_cue = v == 1.0,
+                "edgep" if (0.0..=1.0).contains(&v) => e.edge_power = Some(v),
                 _ => return Err(bad()),
             }
         }
@@ -265,11 +298,17 @@ impl HighlightEstimate {
                 format!("the rim constant must be in (0, 1000], got {}", self.rim_k),
             ));
         }
-        if !(0.0..=1.0).contains(&self.edge) {
-            return Err(Error::param(
-                "highlight",
-                format!("the edge share must be in [0, 1], got {}", self.edge),
-            ));
+        for (name, v) in [
+            ("edge", self.edge),
+            ("rim", self.rim_ramp),
+            ("edgep", self.edge_power.unwrap_or(0.0)),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(Error::param(
+                    "highlight",
+                    format!("the {name} share must be in [0, 1], got {v}"),
+                ));
+            }
         }
         HighlightRecovery {
             gain: self.max_gain,
@@ -310,10 +349,15 @@ impl HighlightEstimate {
             blur_k,
             tone,
             self.threshold,
-            self.edge,
+            &Profile {
+                edge: self.edge,
+                keep: self.keep,
+                rim_ramp: self.rim_ramp,
+                edge_power: self.edge_power,
+            },
             &mut out,
             |region, value| {
-                stamp += 4;
+                stamp += 5;
                 let (g, tint) = est.estimate(region, value, &lin, w, h, &mut mark, stamp);
                 (g, Some(tint))
             },
@@ -334,7 +378,8 @@ impl HighlightEstimate {
         mark: &mut [u32],
         stamp: u32,
     ) -> (f64, [f64; 3]) {
-        let (far_m, near_m, clip_m, rim_m) = (stamp, stamp + 1, stamp + 2, stamp + 3);
+        let (far_m, near_m, clip_m, rim_m, next_m) =
+            (stamp, stamp + 1, stamp + 2, stamp + 3, stamp + 4);
         let around = |i: usize, r: usize| {
             let (x, y) = (i % w, i / w);
             let ys = y.saturating_sub(r)..=(y + r).min(h - 1);
@@ -406,7 +451,50 @@ impl HighlightEstimate {
             }
         }
         let rim_light = (rim[0] + rim[1] + rim[2]) / 3.0;
-        let x = rim_light / edge.max(1) as f64;
+        // The next ring out (2 px from the clipped pixels): a background estimate closer
+        // to the rim than the 3-4 px ring.
+        let mut next = Vec::new();
+        for &i in &clipped {
+            for j in around(i, 2) {
+                if mark[j] != clip_m && mark[j] != rim_m && mark[j] != next_m {
+                    next.push(j);
+                    mark[j] = next_m;
+                }
+            }
+        }
+        let mut bg_next = [0.0; 3];
+        for (c, b) in bg_next.iter_mut().enumerate() {
+            let mut v: Vec<f64> = next.iter().map(|&j| lin[3 * j + c]).collect();
+            v.sort_by(f64::total_cmp);
+            *b = v.get(v.len() / 2).copied().unwrap_or(bg[c]);
+        }
+        let lift_of = |j: usize, c: usize| (lin[3 * j + c] - bg_next[c]).max(0.0);
+        let lifts: Vec<f64> = rim_seen
+            .iter()
+            .map(|&j| (0..3).map(|c| lift_of(j, c)).sum::<f64>() / 3.0)
+            .collect();
+        let x = if self.ring_cue {
+            // The rim's light per rim pixel above the next ring.
+            lifts.iter().sum::<f64>() / rim_seen.len().max(1) as f64
+        } else {
+            rim_light / edge.max(1) as f64
+        };
+        if self.tint_weighted {
+            // Each rim pixel's colour above the next ring, weighted by its lift: the
+            // brightest rim pixels carry the source's colour, the rest mostly background.
+            let wsum: f64 = lifts.iter().sum();
+            if wsum > 0.0 {
+                for (c, r) in rim.iter_mut().enumerate() {
+                    let m: f64 = rim_seen
+                        .iter()
+                        .zip(&lifts)
+                        .map(|(&j, &wj)| wj * lift_of(j, c))
+                        .sum::<f64>()
+                        / wsum;
+                    *r = m * rim_seen.len() as f64;
+                }
+            }
+        }
         let g = (self.rim_k / x.max(1e-6)).clamp(1.0, self.max_gain);
         let tint = if self.tint {
             // Towards white where the rim holds little light.
@@ -451,7 +539,7 @@ fn recover_regions<T: Real>(
     blur_k: f64,
     tone: &Tone,
     t0: f64,
-    edge_share: f64,
+    profile: &Profile,
     out: &mut Image<T>,
     mut gain_of: impl FnMut(&[usize], &[f64]) -> (f64, Option<[f64; 3]>),
 ) {
@@ -489,8 +577,8 @@ fn recover_regions<T: Real>(
             continue;
         }
         let (g_region, tint) = gain_of(&region, &value);
+        let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
         for &i in &region {
-            let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
             let (x, y) = (i % w, i / w);
             let on_edge = clipped(i)
                 && (x == 0
@@ -501,15 +589,23 @@ fn recover_regions<T: Real>(
                     || !clipped(i + 1)
                     || !clipped(i - w)
                     || !clipped(i + w));
-            let g = if on_edge {
-                1.0 + (g_region - 1.0) * edge_share
-            } else {
-                g_region
+            // Profile: interior clipped pixels the full gain, edge pixels a part of it.
+            let g = match (on_edge, profile.edge_power) {
+                (true, Some(p)) => g_region.powf(p),
+                (true, None) => 1.0 + (g_region - 1.0) * profile.edge,
+                (false, _) => g_region,
             };
             let t = ((value[i] - t0) / (1.0 - t0)).clamp(0.0, 1.0);
             let radius_px = blur_k * (disparity.data[i].f64() - focus_disparity).abs();
-            let ramp = smoothstep(t) * defocus_gate(radius_px);
+            let mut ramp = smoothstep(t) * defocus_gate(radius_px);
+            if !clipped(i) {
+                ramp *= profile.rim_ramp;
+            }
             for (c, v) in out.data[3 * i..3 * i + 3].iter_mut().enumerate() {
+                if profile.keep && clipped(i) && v.f64() < CLIPPED_LEVEL {
+                    // An unclipped channel of a clipped pixel is what the scene showed.
+                    continue;
+                }
                 let lin = tone.linearize(v.f64().max(0.0));
                 let new = match tint {
                     // The gain on every channel: the hue is kept.
@@ -521,6 +617,28 @@ fn recover_regions<T: Real>(
             }
         }
     }
+}
+
+/// How a region's gain is spread over its pixels ([`recover_regions`]).
+struct Profile {
+    /// Share of `g - 1` on clipped pixels with an unclipped 4-neighbour.
+    edge: f64,
+    /// Unclipped channels of clipped pixels keep their value.
+    keep: bool,
+    /// Scale of the ramp on the region's unclipped (bright) pixels.
+    rim_ramp: f64,
+    /// With `Some(p)`, clipped edge pixels get the gain `g^p` instead of the share `edge`.
+    edge_power: Option<f64>,
+}
+
+impl Profile {
+    /// The gain on every pixel of the region.
+    const FLAT: Profile = Profile {
+        edge: 1.0,
+        keep: false,
+        rim_ramp: 1.0,
+        edge_power: None,
+    };
 }
 
 /// `s(t) = t^2 (3 - 2t)` for `t` in [0, 1].
@@ -651,11 +769,18 @@ mod tests {
         }
         let mut disp = Image::<f64>::new(w, h, 1);
         disp.data.iter_mut().for_each(|v| *v = 1.0);
+        // The earlier cue, tint and profile (per clipped edge pixel, 3-4 px ring, a share
+        // of the gain on edge pixels); the defaults are tested below.
         let est = HighlightEstimate {
             rim_k: 0.3,
             max_gain: 8.0,
             edge: 1.0,
             white_rim: 0.05,
+            keep: false,
+            rim_ramp: 1.0,
+            edge_power: None,
+            ring_cue: false,
+            tint_weighted: false,
             ..HighlightEstimate::DEFAULT
         };
         let out = est.apply(&img, &disp, 0.0, 30.0, &tone).unwrap();
@@ -703,6 +828,18 @@ mod tests {
             (e.rim_k, e.max_gain, e.edge, e.tint, e.paper, e.white_rim),
             (0.5, 4.0, 0.5, false, false, 0.1)
         );
+        assert_eq!(e.edge_power, None, "edge= switches to the share rule");
+        let e = HighlightEstimate::parse("auto:edgep=0.5,keep=0,cue=0,tintw=0,rim=0.5").unwrap();
+        assert_eq!(
+            (
+                e.edge_power,
+                e.keep,
+                e.ring_cue,
+                e.tint_weighted,
+                e.rim_ramp
+            ),
+            (Some(0.5), false, false, false, 0.5)
+        );
         assert!(PhotoHighlights::parse("auto").unwrap().paper_boost());
         assert!(!PhotoHighlights::parse("auto:paper=0")
             .unwrap()
@@ -715,9 +852,153 @@ mod tests {
             "auto:max=0.5",
             "auto:edge=2",
             "auto:x=1",
+            "auto:edgep=2",
+            "auto:rim=-1",
+            "auto:keep=2",
+            "auto:cue=0.5",
             "autox",
         ] {
             assert!(PhotoHighlights::parse(bad).is_err(), "{bad}");
         }
+    }
+
+    /// Builds an encoded image from linear colours.
+    fn encode_lin(lin: &[f64], w: usize, h: usize) -> Image<f64> {
+        let mut img = Image::<f64>::new(w, h, 3);
+        for (v, l) in img.data.iter_mut().zip(lin) {
+            *v = tone().encode(*l);
+        }
+        img
+    }
+
+    #[test]
+    fn ring_cue_reads_the_rim_against_the_next_ring() {
+        // A clipped 4x4 blob whose 1 px rim and the next ring out lie on a bright patch
+        // (0.3) in a dark scene (0.05): against the next ring the rim holds no light (a
+        // bright source: the largest gain); against the 3-4 px ring it seems to hold
+        // much (a dim source). Linear values, defocused by 30 px.
+        let (w, h) = (24, 24);
+        let mut lin = vec![0.05; w * h * 3];
+        for y in 6..18 {
+            for x in 6..18 {
+                let v = if (10..14).contains(&x) && (10..14).contains(&y) {
+                    1.0
+                } else if (8..16).contains(&x) && (8..16).contains(&y) {
+                    0.3
+                } else {
+                    0.05
+                };
+                lin[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&[v; 3]);
+            }
+        }
+        let img = encode_lin(&lin, w, h);
+        let mut disp = Image::<f64>::new(w, h, 1);
+        disp.data.iter_mut().for_each(|v| *v = 1.0);
+        let ring = HighlightEstimate {
+            tint: false,
+            ..HighlightEstimate::DEFAULT
+        };
+        let old = HighlightEstimate {
+            ring_cue: false,
+            ..ring
+        };
+        let centre = |e: &HighlightEstimate| {
+            let out = e.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
+            tone().linearize(out.data[3 * (11 * w + 11)])
+        };
+        assert!(
+            (centre(&ring) - ring.max_gain).abs() < 1e-9,
+            "{}",
+            centre(&ring)
+        );
+        assert!(centre(&old) < 0.5 * ring.max_gain, "{}", centre(&old));
+    }
+
+    #[test]
+    fn weighted_tint_follows_the_brightest_rim_pixels() {
+        // A clipped 2x2 blob; one rim pixel carries the source's orange light, the others
+        // a faint bluish cast over the grey background. Weighted by light, the tint is
+        // orange; summed unweighted, the many faint pixels make it bluish.
+        let (w, h) = (20, 20);
+        let mut lin = vec![0.1; w * h * 3];
+        let mut put = |x: usize, y: usize, c: [f64; 3]| {
+            lin[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&c);
+        };
+        for (x, y) in [(9, 9), (10, 9), (9, 10), (10, 10)] {
+            put(x, y, [1.0; 3]);
+        }
+        for y in 8..12 {
+            for x in 8..12 {
+                if !(9..11).contains(&x) || !(9..11).contains(&y) {
+                    put(x, y, [0.1, 0.1, 0.17]);
+                }
+            }
+        }
+        put(8, 9, [0.6, 0.35, 0.15]);
+        let img = encode_lin(&lin, w, h);
+        let mut disp = Image::<f64>::new(w, h, 1);
+        disp.data.iter_mut().for_each(|v| *v = 1.0);
+        let est = HighlightEstimate {
+            white_rim: 0.0,
+            ..HighlightEstimate::DEFAULT
+        };
+        let rgb = |e: &HighlightEstimate| {
+            let out = e.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
+            let i = 3 * (9 * w + 9);
+            [0, 1, 2].map(|c| tone().linearize(out.data[i + c]))
+        };
+        let [r, _, b] = rgb(&est);
+        assert!(r > 1.5 * b, "weighted: orange, got r {r} b {b}");
+        let [r, _, b] = rgb(&HighlightEstimate {
+            tint_weighted: false,
+            ..est
+        });
+        assert!(b > r, "unweighted: bluish, got r {r} b {b}");
+    }
+
+    #[test]
+    fn profile_keeps_unclipped_channels_and_the_rim() {
+        // A clipped 6x6 blob with no rim light (the largest gain `G`): interior pixels get
+        // `G`, edge pixels `G^p`; a pixel clipped in red and green only keeps its blue; a
+        // bright unclipped pixel of the region keeps its value with `rim` 0.
+        let (w, h) = (20, 20);
+        let mut lin = vec![0.05; w * h * 3];
+        for y in 7..13 {
+            for x in 7..13 {
+                lin[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&[1.0; 3]);
+            }
+        }
+        lin[3 * (9 * w + 9) + 2] = 0.5; // clipped in red and green only (interior)
+        let bright = tone().linearize(0.95);
+        lin[3 * (10 * w + 13)..3 * (10 * w + 13) + 3].copy_from_slice(&[bright; 3]);
+        let img = encode_lin(&lin, w, h);
+        let mut disp = Image::<f64>::new(w, h, 1);
+        disp.data.iter_mut().for_each(|v| *v = 1.0);
+        let est = HighlightEstimate {
+            tint: false,
+            rim_k: 100.0,
+            ..HighlightEstimate::DEFAULT
+        };
+        let out = est.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
+        let at = |im: &Image<f64>, x: usize, y: usize, c: usize| {
+            tone().linearize(im.data[3 * (y * w + x) + c])
+        };
+        let g = est.max_gain;
+        let p = est.edge_power.unwrap();
+        assert!((at(&out, 10, 10, 0) - g).abs() < 1e-9);
+        assert!((at(&out, 7, 10, 0) - g.powf(p)).abs() < 1e-9);
+        assert!((at(&out, 7, 7, 1) - g.powf(p)).abs() < 1e-9);
+        assert!((at(&out, 9, 9, 0) - g).abs() < 1e-9);
+        assert_eq!(at(&out, 9, 9, 2), at(&img, 9, 9, 2));
+        assert_eq!(at(&out, 13, 10, 0), at(&img, 13, 10, 0));
+        // Without `keep` and with the full ramp, both change.
+        let all = HighlightEstimate {
+            keep: false,
+            rim_ramp: 1.0,
+            ..est
+        };
+        let out = all.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
+        assert!((at(&out, 9, 9, 2) - g).abs() < 1e-9);
+        assert!(at(&out, 13, 10, 0) > at(&img, 13, 10, 0) + 0.5);
     }
 }

@@ -318,11 +318,14 @@ fn photo_highlights_apply_to_photos_only() {
     assert!(s.settings.camera.highlight);
     {
         // The defocused clipped 2x2 blob (all edge pixels, a rim at the background: the
-        // largest gain, 3, of which the edge share 0.25) is recovered; the rest is kept.
+        // largest gain `max`, on edge pixels `max^edgep`) is recovered; the rest is kept.
         let got = &s.stack.layers[0].rgb_encoded;
         let tone = view(PhotoHighlights::Off).tone();
         let lin = tone.linearize(got.data[3 * (5 * w + 3)] as f64);
-        assert!((lin - 1.5).abs() < 1e-4, "{lin}");
+        let d = drbokeh::highlight::HighlightEstimate::DEFAULT;
+        let want = d.max_gain.powf(d.edge_power.unwrap());
+        assert!((lin - want).abs() < 1e-4, "{lin} vs {want}");
+        assert!(lin > 2.0, "{lin}");
         assert_eq!(got.data[0], 0.3);
     }
     let stack = LayerStack::single(rgb.clone(), disparity.clone()).unwrap();
