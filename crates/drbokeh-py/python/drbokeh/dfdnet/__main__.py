@@ -20,7 +20,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from .data import FOCUS, SplitSpec, default_splits, prepare, subset
+from .data import FOCUS, SplitSpec, default_splits, prepare
 from .evaluate import evaluate, metrics
 from .train import HIGHLIGHTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
