@@ -20,23 +20,27 @@ from typing import List, Optional
 
 import numpy as np
 
-from .data import SplitSpec, default_splits, prepare, subset
+from .data import FOCUS, SplitSpec, default_splits, prepare
 from .evaluate import evaluate, metrics
-from .train import HIGHLIGHTS, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
+from .train import HIGHLIGHTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
 
 _log = log_line
+SIZE = 128
+QUICK_SIZE = 64
 
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", "--out", dest="out", required=True, type=Path, help="output directory")
     p.add_argument("--data", type=Path, help="data cache directory (default OUT/data); scenes are made there if missing")
     p.add_argument("--drbokeh", help="the drbokeh command line (default $DRBOKEH_CLI, PATH, or this checkout's target/release)")
-    p.add_argument("--size", type=int, default=128, help="scene size, px (default 128)")
+    p.add_argument("--size", type=int, default=SIZE, help=f"scene size, px (default {SIZE}; {QUICK_SIZE} with --quick)")
     p.add_argument("--spp", type=int, default=144, help="samples per pixel of the traced images (default 144)")
-    p.add_argument("--train-scenes", type=int, default=160)
-    p.add_argument("--val-scenes", type=int, default=16)
-    p.add_argument("--test-scenes", type=int, default=32)
+    p.add_argument("--focus", choices=tuple(FOCUS), default="far",
+                   help="far (default): scenes focused on the background, d >= 0; near: on the nearest billboard, d <= 0 (docs/dfdnet.md)")
+    p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
+    p.add_argument("--val-scenes", type=int, default=32)
+    p.add_argument("--test-scenes", type=int, default=64)
     p.add_argument("--threads", type=int, default=1, help="torch and renderer threads (default 1: on a shared machine two processes of one thread beat one of two)")
     p.add_argument("--steps", type=int, default=TrainConfig.steps, help=f"training steps per run (default {TrainConfig.steps})")
     p.add_argument("--batch", type=int, default=TrainConfig.batch)
@@ -53,7 +57,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _specs(a: argparse.Namespace) -> List[SplitSpec]:
-    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes)
+    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes, a.focus)
 
 
 def _cfg(a: argparse.Namespace) -> TrainConfig:
@@ -103,15 +107,15 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
 
 
 def _quick(a: argparse.Namespace) -> None:
-    """Tiny data (96 px, the scenes of largest blur: K >= 3 px), a few steps of drbokeh
-    ``physical``."""
-    specs = [SplitSpec("train", 1711, 8, 96, 64), SplitSpec("val", 1712, 3, 96, 64), SplitSpec("test", 1713, 8, 96, 64)]
-    cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=2, crop=64, base=8,
-                      lr=2e-3, eval_every=10, threads=a.threads, highlights=a.highlights,
+    """Tiny data (64 px, far focus as the table), a few steps of drbokeh ``physical``."""
+    size = QUICK_SIZE if a.size == SIZE else a.size
+    specs = [SplitSpec("train", 1711, 64, size, a.spp, a.focus), SplitSpec("val", 1712, 8, size, a.spp, a.focus),
+             SplitSpec("test", 1713, 24, size, a.spp, a.focus)]
+    cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=a.batch, crop=min(64, size), base=8,
+                      lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
                       init_disparity=a.init_disparity)
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
-    splits = {k: subset(v, v.blur >= 3.0) for k, v in splits.items()}
     spec = RunSpec("physical", "hssim")
     r = train_run(spec, splits, cfg, a.out, _log)
     losses = [c["loss"] for c in r["curve"]]  # type: ignore[union-attr]
@@ -119,11 +123,15 @@ def _quick(a: argparse.Namespace) -> None:
     from .train import load_model
 
     test = splits["test"]
-    trained = metrics(predict(load_model(a.out / spec.name, cfg), test.aif), test)
-    untrained = metrics(predict(new_model(cfg), test.aif), test)
+    trained_model, untrained_model = load_model(a.out / spec.name, cfg), new_model(cfg)
+    trained = metrics(predict(trained_model, test.aif), test)
+    untrained = metrics(predict(untrained_model, test.aif), test)
     out = {
         "run": spec.name, "steps": cfg.steps,
         "loss_first": float(np.mean(losses[:n])), "loss_last": float(np.mean(losses[-n:])),
+        # The training loss on the whole validation images (fixed, unlike the batches).
+        "val_loss_untrained": split_loss(untrained_model, splits["val"], spec, cfg),
+        "val_loss_trained": split_loss(trained_model, splits["val"], spec, cfg),
         "test_mae_trained": trained["mae"], "test_mae_untrained": untrained["mae"],
         "seconds_per_step": r["seconds_per_step"],
     }

@@ -1,11 +1,18 @@
 """The training data: ray-traced ``drbokeh benchmark make`` scenes, cached as arrays.
 
-Each split is one benchmark seed (train / validation / test never share a scene). Only the
-scenes that focus on the nearest billboard are made (``--shard 0/3``: scene ``i`` focuses
-at disparity 1 when ``i % 3 == 0``, docs/dfd.md), so ``d = disparity - 1 <= 0`` everywhere
-and the sign of ``d`` is determined; a scene whose recorded focus is not 1 is rejected.
-The scenes' largest blur runs log-spaced over the scene index (2-20 px at 256 px, so
-1-10 px at 128 px), so every split covers the whole range of K.
+Each split is one benchmark seed (train / validation / test never share a scene), and one
+focus, so that the sign of ``d = disparity - focus`` is determined everywhere:
+
+- ``far`` (the default, docs/dfdnet.md says why): ``--shard 2/3`` makes the scenes
+  ``i % 3 == 2``, which focus on the background (disparity 0) or on the farthest
+  foreground, each about half; only those focused on the background are kept, so
+  ``d = disparity >= 0`` and the background is sharp in the traced image.
+- ``near``: ``--shard 0/3``, every scene focuses on the nearest billboard (disparity 1),
+  ``d <= 0`` (sessions 2-3).
+
+A kept scene whose recorded focus is not the split's is impossible by construction and
+rejected. The scenes' largest blur runs log-spaced over the scene index (2-20 px at
+256 px, so 1-10 px at 128 px), so every split covers the whole range of K.
 
 The network and the loss see ``aif`` (the all-in-focus PNG, display-encoded, clipped) and
 ``bokeh`` (the traced defocused PNG) and the scene's ``focus`` and ``blur`` (K); the true
@@ -27,13 +34,16 @@ import numpy as np
 
 @dataclass(frozen=True)
 class SplitSpec:
-    """One split: ``drbokeh benchmark make --scenes 3*count --shard 0/3 --seed seed``."""
+    """One split: ``drbokeh benchmark make --scenes 3*count --shard S/3 --seed seed``
+    (``S`` 0 for ``near`` focus, 2 for ``far``): ``count`` scenes are traced; with ``far``
+    about half of them (those focused on the background) are kept."""
 
     name: str
     seed: int
     count: int
     size: int
     spp: int
+    focus: str = "far"
 
 
 @dataclass
@@ -55,11 +65,18 @@ class Split:
         return int(self.aif.shape[0])
 
 
-def default_splits(size: int = 128, spp: int = 144, train: int = 160, val: int = 16, test: int = 32) -> List[SplitSpec]:
+FOCUS = {"far": (2, 0.0), "near": (0, 1.0)}  # focus -> (shard of 3, disparity in focus)
+
+
+def default_splits(
+    size: int = 128, spp: int = 144, train: int = 240, val: int = 32, test: int = 64, focus: str = "far"
+) -> List[SplitSpec]:
+    if focus not in FOCUS:
+        raise ValueError(f"unknown focus {focus!r} (available: {', '.join(FOCUS)})")
     return [
-        SplitSpec("train", 1701, train, size, spp),
-        SplitSpec("val", 1702, val, size, spp),
-        SplitSpec("test", 1703, test, size, spp),
+        SplitSpec("train", 1701, train, size, spp, focus),
+        SplitSpec("val", 1702, val, size, spp, focus),
+        SplitSpec("test", 1703, test, size, spp, focus),
     ]
 
 
@@ -83,7 +100,7 @@ def find_cli(explicit: Optional[str] = None) -> str:
 def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1) -> None:
     """Runs ``drbokeh benchmark make`` (resumable: scenes already there are kept)."""
     cmd = [
-        cli, "benchmark", "make", "--scenes", str(3 * spec.count), "--shard", "0/3",
+        cli, "benchmark", "make", "--scenes", str(3 * spec.count), "--shard", f"{FOCUS[spec.focus][0]}/3",
         "--seed", str(spec.seed), "--size", str(spec.size), "--spp", str(spec.spp),
         "--threads", str(threads), "--out", str(directory), "-q",
     ]
@@ -92,19 +109,25 @@ def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1)
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr.strip()}")
 
 
-def load_benchmark_dir(directory: Path) -> Split:
+def load_benchmark_dir(directory: Path, focus: str = "near") -> Split:
+    """The scenes of ``directory`` that focus at ``focus`` (``near``: every scene must
+    focus at disparity 1; ``far``: the scenes focused at disparity 0, the background, are
+    kept, the others, focused on the farthest foreground, skipped)."""
     import drbokeh
 
-    aif, bokeh, disp, focus, blur, near, far, names = [], [], [], [], [], [], [], []
+    want = FOCUS[focus][1]
+    aif, bokeh, disp, focus_, blur, near, far, names = [], [], [], [], [], [], [], []
     for scene in drbokeh.load_benchmark(directory):
-        record = json.loads((Path(scene["path"]) / "scene.json").read_text())["derived"]
         f = float(scene["camera"]["focus"])
-        if abs(f - 1.0) > 1e-6:
-            raise ValueError(f"{scene['path']}: focus {f}, expected 1 (near focus only)")
+        if abs(f - want) > 1e-6:
+            if focus == "far":
+                continue
+            raise ValueError(f"{scene['path']}: focus {f}, expected {want} ({focus} focus only)")
+        record = json.loads((Path(scene["path"]) / "scene.json").read_text())["derived"]
         aif.append(np.clip(scene["aif"], 0.0, 1.0).transpose(2, 0, 1))
         bokeh.append(np.clip(scene["ground_truth"], 0.0, 1.0).transpose(2, 0, 1))
         disp.append(scene["disparity"][None])
-        focus.append(1.0)
+        focus_.append(want)
         blur.append(float(scene["camera"]["blur"]))
         near.append(float(record["disparity_near_depth_mm"]))
         far.append(float(record["disparity_far_depth_mm"]))
@@ -112,7 +135,7 @@ def load_benchmark_dir(directory: Path) -> Split:
     f32 = np.float32
     return Split(
         np.stack(aif).astype(f32), np.stack(bokeh).astype(f32), np.stack(disp).astype(f32),
-        np.array(focus, f32), np.array(blur, f32), np.array(near, np.float64),
+        np.array(focus_, f32), np.array(blur, f32), np.array(near, np.float64),
         np.array(far, np.float64), names,
     )
 
@@ -142,7 +165,8 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
     data_dir.mkdir(parents=True, exist_ok=True)
     record = data_dir / "splits.json"
     want = [s.__dict__ for s in specs]
-    if record.exists() and json.loads(record.read_text()) != want:
+    # Caches from before the focus option are near focus.
+    if record.exists() and [{"focus": "near", **r} for r in json.loads(record.read_text())] != want:
         raise ValueError(f"{record} was made with other splits; use another --data directory")
     record.write_text(json.dumps(want, indent=1))
     out: Dict[str, Split] = {}
@@ -153,7 +177,7 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
 
             t0 = time.perf_counter()
             make_benchmark(spec, data_dir / spec.name, find_cli(cli), threads)
-            split = load_benchmark_dir(data_dir / spec.name)
+            split = load_benchmark_dir(data_dir / spec.name, spec.focus)
             _save(split, cache)
             log(f"data: {spec.name}: {len(split)} scenes at {spec.size} px in {time.perf_counter() - t0:.0f} s")
         out[spec.name] = _load(cache)

@@ -5,7 +5,13 @@ MAE and RMSE of the normalised disparity; ``delta < 1.25``, the fraction of pixe
 metric depth ratio ``max(z / z*, z* / z)`` is below 1.25, with depth from disparity through
 the scene's range (``1/z = d (1/z_near - 1/z_far) + 1/z_far``; disparity 0 is the finite
 far depth). ``MAE K>=3`` is the MAE over the scenes whose largest blur is at least 3 px
-(6 px at 256 px, the group docs/dfd.md targets). Reference rows: the untrained network
+(6 px at 256 px, the group docs/dfd.md targets). ``MAE tex`` is the MAE over the pixels
+where defocus can say something about depth: those whose all-in-focus neighbourhood is
+textured (:func:`textured_mask`); elsewhere (flat areas) any disparity renders alike and a
+self-supervised network has nothing to learn from. ``MAE bg`` / ``MAE fg``: the MAE over
+the pixels whose true disparity is below / at least ``BACKGROUND_DISPARITY`` (with far
+focus the in-focus background, about 70 % of the pixels, and the foregrounds); the
+all-pixel MAE is mostly the background's level. Reference rows: the untrained network
 (the same initial weights every run starts from) and the oracle constant (the median of
 each scene's *true* disparity).
 """
@@ -30,17 +36,48 @@ def depth_mm(disparity: np.ndarray, near_mm: np.ndarray, far_mm: np.ndarray) -> 
     return 1.0 / (disparity.astype(np.float64) * (inv_near - inv_far) + inv_far)
 
 
+TEXTURE_STD = 0.04
+BACKGROUND_DISPARITY = 0.05
+TEXTURE_WINDOW = 5
+
+
+def textured_mask(aif: np.ndarray, window: int = TEXTURE_WINDOW, threshold: float = TEXTURE_STD) -> np.ndarray:
+    """``(N, 3, H, W)`` display-encoded all-in-focus images -> ``(N, 1, H, W)`` booleans:
+    the standard deviation of the luminance (mean of the channels) over the
+    ``window x window`` box around the pixel (edge-replicated) is at least ``threshold``."""
+    lum = aif.astype(np.float64).mean(1)
+    r = window // 2
+    pad = np.pad(lum, ((0, 0), (r, r), (r, r)), mode="edge")
+    h, w = lum.shape[-2:]
+    s1 = np.zeros_like(lum)
+    s2 = np.zeros_like(lum)
+    for dy in range(window):
+        for dx in range(window):
+            v = pad[:, dy : dy + h, dx : dx + w]
+            s1 += v
+            s2 += v * v
+    n = window * window
+    var = np.maximum(s2 / n - (s1 / n) ** 2, 0.0)
+    return (np.sqrt(var) >= threshold)[:, None]
+
+
 def metrics(pred: np.ndarray, split: Split, k_min: float = 3.0) -> Dict[str, float]:
     truth = split.disparity
     err = pred.astype(np.float64) - truth
     zp, zt = depth_mm(pred, split.near_mm, split.far_mm), depth_mm(truth, split.near_mm, split.far_mm)
     ratio = np.maximum(zp / zt, zt / zp)
     big = split.blur >= k_min
+    tex = textured_mask(split.aif)
+    bg = truth < BACKGROUND_DISPARITY
     return {
         "mae": float(np.abs(err).mean()),
         "rmse": float(np.sqrt((err ** 2).mean())),
         "delta125": float((ratio < 1.25).mean()),
         "mae_k3": float(np.abs(err[big]).mean()) if big.any() else float("nan"),
+        "mae_tex": float(np.abs(err[tex]).mean()) if tex.any() else float("nan"),
+        "textured_fraction": float(tex.mean()),
+        "mae_bg": float(np.abs(err[bg]).mean()) if bg.any() else float("nan"),
+        "mae_fg": float(np.abs(err[~bg]).mean()) if (~bg).any() else float("nan"),
     }
 
 
@@ -88,16 +125,19 @@ def evaluate(
         "",
         note,
         "",
-        f"Test: {len(test)} scenes ({test.aif.shape[-1]} px, near focus), "
-        f"{int((test.blur >= 3).sum())} with largest blur >= 3 px.",
+        f"Test: {len(test)} scenes ({test.aif.shape[-1]} px, focus at disparity "
+        f"{', '.join(f'{f:g}' for f in sorted(set(test.focus.tolist())))}), "
+        f"{int((test.blur >= 3).sum())} with largest blur >= 3 px; "
+        f"{100 * textured_mask(test.aif).mean():.0f} % of the pixels textured (MAE tex), "
+        f"{100 * (test.disparity < BACKGROUND_DISPARITY).mean():.0f} % background (MAE bg).",
         "",
-        "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | s/step | s/epoch |",
-        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | MAE tex | MAE bg | MAE fg | s/step | s/epoch |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
         lines.append(
             f"| {r['run']} | {r['layer']} | {r['loss']} | {_fmt(r['mae'])} | {_fmt(r['rmse'])} | "
-            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r.get('seconds_per_step', float('nan')), 2)} | "
+            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r['mae_tex'])} | {_fmt(r['mae_bg'])} | {_fmt(r['mae_fg'])} | {_fmt(r.get('seconds_per_step', float('nan')), 2)} | "
             f"{_fmt(r.get('seconds_per_epoch', float('nan')), 1)} |"
         )
     (out_dir / "results.md").write_text("\n".join(lines) + "\n")
