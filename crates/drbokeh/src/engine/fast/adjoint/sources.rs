@@ -16,7 +16,9 @@ use rayon::prelude::*;
 /// Gradients per image pixel: linear colour, alpha (scatter part), disparity (source
 /// part), and K's total.
 #[allow(clippy::type_complexity)]
-pub(super) fn pass_sources<T: Real>(ctx: &Ctx<'_, T>) -> (Vec<[T; 3]>, Vec<T>, Vec<T>, f64) {
+pub(in crate::engine) fn pass_sources<T: Real>(
+    ctx: &Ctx<'_, T>,
+) -> (Vec<[T; 3]>, Vec<T>, Vec<T>, f64) {
     let src = ctx.src;
     let occluding = occluding_table(ctx);
     let tiles: Vec<(Vec<[T; 5]>, f64)> = (0..src.rows)
