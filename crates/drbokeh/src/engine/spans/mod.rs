@@ -235,7 +235,7 @@ pub(crate) fn render_recording<T: Real>(
             let rows = (h - band * band_rows).min(band_rows);
             for (l, (s, span)) in saved.into_iter().zip(spans).enumerate() {
                 rec.saved[l].extend(s);
-                rec.span_rows[l].extend(std::iter::repeat_n(span, rows));
+                rec.span_rows[l].extend(std::iter::repeat(span).take(rows));
             }
         }
         rec
