@@ -33,14 +33,14 @@ if ! command -v chromium >/dev/null 2>&1; then
 fi
 
 rm -rf "$WORK/bench" "$WORK/images" "$WORK/gallery"
-"$BIN" benchmark make --scenes 2 --size 128 --spp 16 --quiet --out "$WORK/bench"
+"$BIN" benchmark make --scenes 2 --size 128 --spp 16 --quiet --output "$WORK/bench"
 mkdir -p "$WORK/images"
 for i in 0 1; do
     cp "$WORK/bench/scene_00$i/aif.png" "$WORK/images/scene$i.png"
     cp "$WORK/bench/scene_00$i/disparity.png" "$WORK/images/scene$i.disp.png"
 done
 "$BIN" gallery --images "$WORK/images" --focal-planes "$PLANES" --blur 12 \
-    --out "$WORK/gallery" --quiet
+    --output "$WORK/gallery" --quiet
 
 shoot() { # page.html screenshot.png
     chromium --headless --no-sandbox --disable-gpu --disable-background-networking \

@@ -160,7 +160,7 @@ def make_inputs(d, binary):
     write_png(os.path.join(gal, "a.disp.png"), w, h, 1, disp, bits=16)
     subprocess.run(
         [binary, "benchmark", "make", "--scenes", "2", "--size", "48", "--spp", "16", "--seed", "3",
-         "--out", os.path.join(d, "bench"), "-q"],
+         "--output", os.path.join(d, "bench"), "-q"],
         check=True,
     )
     # A defocused target for dfd: the demo-free image rendered by the paper preset.
@@ -274,9 +274,9 @@ def cases(i):
                                       "--iterations", "4", "--scales", "1", "--engine", engine,
                                       "-o", "d.npy", "--log", "d.log.json", "-q"],
                     ["d.npy"]))
-    out.append(("eval", ["eval", "--benchmark", f"{i}/bench", "--out", "rep", "-q"], ["rep"]))
+    out.append(("eval", ["eval", "--benchmark", f"{i}/bench", "--output", "rep", "-q"], ["rep"]))
     out.append(("gallery", ["gallery", "--images", f"{i}/gallery", "--focal-planes", "3",
-                            "--out", "gal", "-q"], ["gal"]))
+                            "--output", "gal", "-q"], ["gal"]))
     return out
 
 

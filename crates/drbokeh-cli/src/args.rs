@@ -78,7 +78,7 @@ pub struct CameraArgs {
     /// Tap to focus: focus on the disparity at pixel X,Y (frontmost layer with alpha >= 0.5).
     /// Without --focus or --focus-at, the demo focuses on its subject and other inputs on
     /// the centre pixel.
-    #[arg(long, value_name = "X,Y")]
+    #[arg(long, value_name = "X,Y", allow_hyphen_values = true)]
     pub focus_at: Option<String>,
 
     /// Blur strength K: blur radius in pixels per unit of relative disparity.
@@ -99,11 +99,13 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 0.0)]
     pub offset: f64,
 
-    /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `paper`
-    /// (the paper's 1 + 0.2 m boost; plain --highlight; the default for photos), `off`, or
-    /// GAIN[:THRESHOLD] (recovery of each clipped region of a photo in linear light, e.g.
-    /// 2:0.95). Without the flag: `paper` for --image, off for stacks and the demo.
-    #[arg(long, value_name = "GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "paper")]
+    /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `auto`
+    /// (each clipped region of a photo recovered in linear light with a gain and tint
+    /// estimated from its rim, plus the paper's boost; the default for photos), `paper`
+    /// (the paper's 1 + 0.2 m boost; plain --highlight), `off`, or GAIN[:THRESHOLD] (one
+    /// gain for every clipped region, e.g. 2:0.95). Without the flag: `auto` for --image,
+    /// off for stacks and the demo.
+    #[arg(long, value_name = "auto|paper|off|GAIN[:THRESHOLD]", num_args = 0..=1, default_missing_value = "paper")]
     pub highlight: Option<String>,
 
     /// Aperture shape: circle, polygon:N[:DEG] (N blades rotated by DEG degrees), a name
@@ -112,12 +114,8 @@ pub struct CameraArgs {
     #[arg(long, default_value = "circle", value_name = "SHAPE")]
     pub aperture: String,
 
-    /// Model preset. physical (default): the paper's equation with layer coverage averaged
-    /// over the receiver's soft aperture disc (radius K|d|, its circle of confusion) and a
-    /// sharp scatter step centred on the circle of confusion (in-focus pixels stay sharp);
-    /// +4.4 to +4.6 dB PSNR over paper, better on all 32 scenes of two ray-traced
-    /// benchmark sets (docs/physical.md). paper: the published Dr.Bokeh model, exactly.
-    #[arg(long, default_value = "physical", value_name = "NAME")]
+    // Help generated from the library's list of presets (crate::names).
+    #[arg(long, default_value = "physical", value_name = "NAME", help = crate::names::preset_help())]
     pub preset: String,
 }
 
@@ -132,13 +130,7 @@ pub struct ExecArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
 
-    /// Execution engine. auto (default): in f32, per band and layer the span engine or the
-    /// fast engine's taps, whichever is predicted cheaper; threaded with --f64 (bit-exact,
-    /// for checks). spans: O(r) row spans (within ~2e-5 relative of fast). fast: skips taps
-    /// that cannot contribute (agrees with the reference to ~1e-6 in linear light) and has
-    /// no practical window limit. threaded: every window tap, all
-    /// cores. reference: plain loops, the oracle (slow).
-    #[arg(long, default_value = "auto", value_name = "ENGINE")]
+    #[arg(long, default_value = "auto", value_name = "ENGINE", help = crate::names::engine_help())]
     pub engine: String,
 
     /// No progress bar or notes on stderr.
@@ -307,11 +299,11 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "edge_sensitivity" => "--edge-sensitivity",
         "fine_iterations" => "--fine-iterations",
         "finest_scale" => "--finest-scale",
-        "highlights" => "--highlights",
+        "highlights" => "--clipped",
         "init" => "--init",
         "iterations" => "--iterations",
-        "layer" => "--layer",
-        "layers" => "--layers",
+        "layer" => "--method",
+        "layers" => "--methods",
         "losses" => "--losses",
         "lr" => "--lr",
         "lr_decay" => "--lr-decay",
@@ -319,6 +311,8 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "median_sigma" => "--median-sigma",
         "min_improvement" => "--min-improvement",
         "optimiser" => "--optimiser",
+        "occlusion_layers" => "--occlusion-layers",
+        "redecompose" => "--redecompose-every",
         "param" => "--param",
         _ => return None,
     })

@@ -7,7 +7,9 @@ use drbokeh::bench::{
 };
 use std::path::PathBuf;
 
-/// Measure the engines on standard workloads (0.25 to 24 MP, K = 10 to 100, 1-3 layers, the
+/// Performance report: the engines (spans, auto, fast, threaded, reference) on standard workloads.
+///
+/// Measures the engines on standard workloads (0.25 to 24 MP, K = 10 to 100, 1-3 layers, the
 /// demo, a uniformly blurred worst case, 100- and 200-px blurs, the GEGL-equivalent workload
 /// of issue 18 with both presets, and a radius sweep 5..200 px of the span engine): the span
 /// engine (spans, and auto: spans or taps per band and layer) against the fast engine, the
@@ -19,16 +21,17 @@ use std::path::PathBuf;
 /// adjoint (about a minute on 2 cores) and the largest gradient difference to it.
 /// --json writes {"rows": [...], "adjoint": {...}}.
 ///
-/// Example:
+/// Examples:
+///   drbokeh bench --quick
 ///   drbokeh bench --quick --json bench.json
+///   drbokeh bench --only demo
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct BenchArgs {
     /// Only the small workloads (a minute or two).
     #[arg(long)]
     pub quick: bool,
-    /// Run only workloads whose name contains this text.
-    #[arg(long, value_name = "TEXT")]
+    #[arg(long, value_name = "TEXT", help = crate::names::bench_only_help())]
     pub only: Option<String>,
     /// Also write the rows as JSON.
     #[arg(long, value_name = "FILE")]

@@ -6,8 +6,8 @@ use clap::Args;
 use drbokeh::dfd::benchmark::{self, DfdBenchmarkConfig, DfdLayer, LossCombo, SceneGroup};
 use drbokeh::dfd::experiment::{markdown_table, paper_combos, run_experiment, synthetic_pair};
 use drbokeh::dfd::{
-    estimate_disparity, report, DfdOptions, Highlights, Init, LossWeights, MedianRefine, Optimiser,
-    Parameterisation, RenderLayer,
+    estimate_disparity, report, DfdOptions, Highlights, Init, LayeredObjective, LossWeights,
+    MedianRefine, Optimiser, Parameterisation, RenderLayer, DEFAULT_REDECOMPOSE_EVERY,
 };
 use drbokeh::{io, Preset, Progress, RenderSettings};
 use std::path::{Path, PathBuf};
@@ -49,8 +49,14 @@ pub struct OptimiserArgs {
     pub optimiser: String,
     /// Pixels clipped (white) in the all-in-focus image: model (optimise their true
     /// brightness with the disparity), mask (leave every pixel they can reach out of the
-    /// loss) or ignore.
-    #[arg(long, default_value = "model", value_name = "MODE")]
+    /// loss) or ignore. (Formerly --highlights, kept as an alias: render's --highlight is
+    /// another thing.)
+    #[arg(
+        long = "clipped",
+        alias = "highlights",
+        default_value = "model",
+        value_name = "MODE"
+    )]
     pub highlights: String,
     /// Initial disparity: sweepN (default sweep9: render the pair at N constant
     /// disparities, keep per pixel the one that matches best over an edge-aware window),
@@ -69,6 +75,15 @@ pub struct OptimiserArgs {
     /// in the weighted median falls to exp(-1/2) (default 0.05).
     #[arg(long, value_name = "SIGMA")]
     pub median_sigma: Option<f64>,
+    /// Layers of the occlusion-aware objective of the drbokeh method: the all-in-focus
+    /// image is rendered as the layer stack that `render --image --disparity` makes of it
+    /// at the current estimate (the hidden background filled in behind nearer layers), at
+    /// most N layers (0 or 1: one opaque layer). GaussPSF and aperture ignore it.
+    #[arg(long, value_name = "N")]
+    pub occlusion_layers: Option<usize>,
+    /// Iterations between re-decompositions of the occlusion-aware objective.
+    #[arg(long, value_name = "N")]
+    pub redecompose_every: Option<usize>,
     /// Gamma of the display encoding.
     #[arg(long, default_value_t = 2.2)]
     pub gamma: f64,
@@ -112,6 +127,18 @@ impl OptimiserArgs {
                 None => bail!("invalid parameter --median-sigma: the median refinement is off (--median-radius 0)"),
             }
         }
+        if let Some(n) = self.occlusion_layers {
+            o.layered = (n > 1).then(|| LayeredObjective {
+                max_layers: n,
+                every: o.layered.map_or(DEFAULT_REDECOMPOSE_EVERY, |l| l.every),
+            });
+        }
+        if let Some(every) = self.redecompose_every {
+            match o.layered.as_mut() {
+                Some(l) => l.every = every,
+                None => bail!("invalid parameter --redecompose-every: the occlusion-aware objective is off (--occlusion-layers 1)"),
+            }
+        }
         o.settings.camera.gamma = self.gamma;
         o.engine = self.engine.parse()?;
         o.validate()?;
@@ -132,7 +159,9 @@ fn parse_init(s: &str) -> Result<Init> {
     Ok(Init::Constant(v))
 }
 
-/// Recover a disparity map from an (all-in-focus, defocused) pair of the same view by
+/// Depth from defocus: recover disparity from an all-in-focus + defocused pair.
+///
+/// Recovers a disparity map from an (all-in-focus, defocused) pair of the same view by
 /// optimising it through a differentiable renderer until the render of the all-in-focus
 /// image matches the defocused one (supplement sec. 3.2).
 ///
@@ -146,13 +175,18 @@ fn parse_init(s: &str) -> Result<Init> {
 /// Loss: 0.5 L1 + 20 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
 /// started from a plane sweep, at the finest scale a cost budget allows; clipped
 /// highlights of the all-in-focus image are modelled (their lost energy is found in the
-/// defocused image); pixels the defocused image clips are left out. Writes the disparity (near = 1), a confidence map
-/// (where the pair carries depth information), a preview and a JSON log of every
-/// iteration and the time per scale.
+/// defocused image); pixels the defocused image clips are left out. Writes the disparity
+/// (near = 1), a confidence map (where the pair carries depth information), a preview and
+/// a JSON log of every iteration and the time per scale.
 ///
-/// Example (a benchmark scene):
-///   drbokeh dfd --all-in-focus scene_003/aif.png --defocused scene_003/bokeh.png \
-///       --focus 1 --blur 8.98 --output disp.png
+/// Examples (a ray-traced pair with its camera, then a pair from a benchmark scene):
+///   drbokeh trace examples/photo-scene.json -o photo-trace
+///   drbokeh dfd --all-in-focus photo-trace/aif.png \
+///       --defocused photo-trace/bokeh.png --focus 0.351 --blur 18.38 \
+///       -o disp.png
+///   drbokeh dfd --all-in-focus bench/scene_003/aif.png \
+///       --defocused bench/scene_003/bokeh.png --focus 1 --blur 8.98 \
+///       --method gausspsf -o disp.png
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct DfdArgs {
@@ -172,8 +206,8 @@ pub struct DfdArgs {
     /// lens, docs/physical.md) or paper (the published model).
     #[arg(long, default_value = "physical", value_name = "NAME")]
     pub preset: String,
-    /// Rendering layer to optimise through: drbokeh (default), gausspsf or aperture.
-    #[arg(long, default_value = "drbokeh")]
+    // Formerly --layer (kept as a hidden alias).
+    #[arg(long = "method", alias = "layer", default_value = "drbokeh", value_name = "NAME", help = crate::names::dfd_method_help())]
     pub layer: String,
     /// Loss terms, comma-separated: l1, smooth, hssim, ssim (a single 11-window SSIM).
     #[arg(long, default_value = "l1,smooth,hssim")]
@@ -340,8 +374,10 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     Ok(())
 }
 
-/// Depth-from-defocus experiments: rendering layers x loss combinations (L1+G, L1+G+SSIM,
-/// L1+G+HSSIM), scored against the true disparity.
+/// Depth-from-defocus experiment: rendering layers x loss combinations, scored against the truth.
+///
+/// Rendering layers (--methods) x loss combinations (L1+G, L1+G+SSIM, L1+G+HSSIM),
+/// scored against the true disparity.
 ///
 /// --benchmark DIR: ray-traced pairs made by `drbokeh benchmark make` (aif.png, bokeh.png,
 /// scene.json's K and focus; truth disparity.npy). Rows: drbokeh with preset physical and
@@ -356,9 +392,12 @@ pub fn run(a: &DfdArgs) -> Result<()> {
 /// check: the renderer recovers what it rendered).
 ///
 /// Examples:
-///   drbokeh benchmark make --scenes 24 --seed 201 --size 256 --spp 256 --out bench
-///   drbokeh dfd-eval --benchmark bench --groups determined --out report/
-///   drbokeh dfd-eval --synthetic --pairs 4 --size 64 --out report/
+///   drbokeh dfd-eval --synthetic --pairs 2 --size 64 --methods drbokeh \
+///       --losses hssim -o report
+///   drbokeh benchmark make --scenes 24 --seed 201 --size 256 --spp 256 \
+///       -o bench
+///   drbokeh dfd-eval --benchmark bench --groups determined \
+///       --methods physical,gausspsf -o report
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct DfdEvalArgs {
@@ -373,9 +412,8 @@ pub struct DfdEvalArgs {
     /// Synthetic pairs rendered by our renderer instead.
     #[arg(long)]
     pub synthetic: bool,
-    /// Benchmark: rendering layers, comma-separated (physical, paper, gausspsf, aperture)
-    /// or all. Synthetic: drbokeh, gausspsf, aperture.
-    #[arg(long, value_name = "LIST")]
+    // Formerly --layers (kept as a hidden alias; render's --layers is a stack file).
+    #[arg(long = "methods", alias = "layers", value_name = "LIST", help = crate::names::dfd_eval_methods_help())]
     pub layers: Option<String>,
     /// Loss combinations, comma-separated: l1g (L1+G), ssim (L1+G+SSIM), hssim
     /// (L1+G+HSSIM), or all.
@@ -406,8 +444,8 @@ pub struct DfdEvalArgs {
     pub preset: String,
     #[command(flatten)]
     pub opt: OptimiserArgs,
-    /// Output directory.
-    #[arg(long, value_name = "DIR")]
+    /// Output directory (created if missing). --out is an alias.
+    #[arg(long = "output", short = 'o', alias = "out", value_name = "DIR")]
     pub out: PathBuf,
     /// No progress bar.
     #[arg(long, short)]
@@ -497,9 +535,9 @@ fn run_synthetic(a: &DfdEvalArgs) -> Result<()> {
         .split(',')
         .map(|s| {
             s.trim().parse::<RenderLayer>().map_err(|e| match e {
-                // The parser speaks of dfd's --layer; here the option is --layers.
+                // The parser speaks of dfd's --method; here the option is --methods.
                 drbokeh::Error::InvalidParameter { problem, .. } => {
-                    drbokeh::Error::param("--layers", problem)
+                    drbokeh::Error::param("--methods", problem)
                 }
                 e => e,
             })

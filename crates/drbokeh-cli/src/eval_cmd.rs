@@ -9,7 +9,7 @@ use drbokeh::eval::report::{self, Method};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Evaluate every method on a ray-traced benchmark against its ground truth.
+/// Evaluate every method on a ray-traced benchmark: scores, tables, plots, HTML gallery.
 ///
 /// Methods: photo-physical and photo-paper (the headline: `drbokeh render --image aif.png
 /// --disparity disparity.npy` as a user runs it), gather, scatter, gausspsf, layered
@@ -22,9 +22,11 @@ use std::time::Instant;
 /// psnr_vs_blur.svg, ssim_vs_blur.svg, ms_ssim_vs_blur.svg, index.html (a gallery with
 /// every render and its error map; the folder is self-contained) and scenes/<scene>/*.
 ///
-/// Example:
-///   drbokeh benchmark make --scenes 100 --size 512 --out bench --shard 0/10
-///   drbokeh eval --benchmark bench --out report
+/// Examples:
+///   drbokeh benchmark make --scenes 4 --size 128 --spp 64 -o bench
+///   drbokeh eval --benchmark bench -o report
+///   drbokeh eval --benchmark bench --methods photo-physical,scatter \
+///       --limit 2 -o report
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct EvalArgs {
@@ -32,12 +34,12 @@ pub struct EvalArgs {
     #[arg(long, value_name = "DIR")]
     pub benchmark: PathBuf,
 
-    /// Report directory (created if missing; existing report files are replaced).
-    #[arg(long, value_name = "REPORT")]
+    /// Report directory (created if missing; existing report files are replaced). --out is
+    /// an alias.
+    #[arg(long = "output", short = 'o', alias = "out", value_name = "REPORT")]
     pub out: PathBuf,
 
-    /// Comma-separated methods, or `all`.
-    #[arg(long, default_value = "all", value_name = "LIST")]
+    #[arg(long, default_value = "all", value_name = "LIST", help = crate::names::eval_methods_help())]
     pub methods: String,
 
     /// Evaluate only the first N scenes (sorted by name).
@@ -57,7 +59,7 @@ pub struct EvalArgs {
     pub quiet: bool,
 }
 
-/// Refocus gallery: render a focal sweep of image + disparity pairs with every method.
+/// Refocus gallery of image + disparity pairs: a focal sweep, methods side by side (HTML).
 ///
 /// Inputs: DIR holds pairs NAME.png (or .jpg/.jpeg/.tif/.tiff/.exr) and NAME.disp.png (or
 /// .disp.tif/.disp.exr/.disp.npy/.disp.npz): a disparity map, larger = nearer, min-max
@@ -65,8 +67,10 @@ pub struct EvalArgs {
 ///
 /// Writes REPORT/index.html and REPORT/NAME/{input.jpg, disparity.png, fNN_<method>.jpg}.
 ///
-/// Example:
-///   drbokeh gallery --images photos --focal-planes 10 --out gallery
+/// Examples:
+///   drbokeh gallery --images examples --focal-planes 3 -o gallery
+///   drbokeh gallery --images photos --methods photo-physical,scatter \
+///       --blur 20 -o gallery
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct GalleryArgs {
@@ -78,8 +82,8 @@ pub struct GalleryArgs {
     #[arg(long, default_value_t = 10, value_name = "N")]
     pub focal_planes: usize,
 
-    /// Output directory (created if missing).
-    #[arg(long, value_name = "REPORT")]
+    /// Output directory (created if missing). --out is an alias.
+    #[arg(long = "output", short = 'o', alias = "out", value_name = "REPORT")]
     pub out: PathBuf,
 
     /// Blur strength K: CoC radius in pixels per unit of normalised disparity.
@@ -90,8 +94,7 @@ pub struct GalleryArgs {
     #[arg(long, default_value_t = 2.2)]
     pub gamma: f64,
 
-    /// Comma-separated methods (gather, scatter, gausspsf, layered, paper-aif), or `all`.
-    #[arg(long, default_value = "all", value_name = "LIST")]
+    #[arg(long, default_value = "all", value_name = "LIST", help = crate::names::gallery_methods_help())]
     pub methods: String,
 
     /// Number of worker threads (default: all cores).
@@ -115,7 +118,7 @@ pub fn run_eval(a: &EvalArgs) -> Result<()> {
     let count = a.limit.map_or(scenes.len(), |n| n.min(scenes.len()));
     drbokeh::io::OutputPlan::new()
         .input(&a.benchmark, "--benchmark")
-        .dir(&a.out, "--out", drbokeh::io::DirMode::Merge)
+        .dir(&a.out, "--output", drbokeh::io::DirMode::Merge)
         .check()?;
     // The whole report is written into a temporary tree, merged into --out only once
     // every scene has been evaluated (a corrupt scene leaves nothing behind).
@@ -187,7 +190,7 @@ pub fn run_gallery(a: &GalleryArgs) -> Result<()> {
     };
     drbokeh::io::OutputPlan::new()
         .input(&a.images, "--images")
-        .dir(&a.out, "--out", drbokeh::io::DirMode::Merge)
+        .dir(&a.out, "--output", drbokeh::io::DirMode::Merge)
         .check()?;
     // Written into a temporary tree, merged into --out only once complete.
     let mut staging = drbokeh::io::Staging::new();

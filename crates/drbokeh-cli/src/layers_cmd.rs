@@ -10,19 +10,22 @@ use drbokeh::scene::{self, Layering, Photo, PhotoFiles};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Decompose a photo into a layer stack (no learned model, no downloads).
+/// Decompose a photo (image + disparity, optional matte) into an inpainted layer stack.
 ///
-/// With --alpha: the paper's two layers (foreground = matte; background inpainted under
-/// it). Without: up to --max-layers depth layers cut at disparity discontinuities, each
-/// layer's hidden part inpainted (colour by fast marching, disparity by a smooth fill from
-/// the far side). Writes STACK.npz (input to `drbokeh render --layers`) and, unless
-/// --no-preview, STACK.layerK.png (colour over a checkerboard by alpha) and
-/// STACK.layerK.disparity.png for every layer K (0 = front). See docs/layering.md.
+/// No learned model, no downloads. With --alpha: the paper's two layers (foreground =
+/// matte; background inpainted under it). Without: up to --max-layers depth layers cut at
+/// disparity discontinuities, each layer's hidden part inpainted (colour by fast marching,
+/// disparity by a smooth fill from the far side). Writes STACK.npz (input to `drbokeh
+/// render --layers`) and, unless --no-preview, STACK.layerK.png (colour over a checkerboard
+/// by alpha) and STACK.layerK.disparity.png for every layer K (0 = front). See
+/// docs/layering.md.
 ///
 /// Examples:
-///   drbokeh layers --image photo.jpg --disparity disp.png --output stack.npz
-///   drbokeh layers --image photo.jpg --depth depth.exr --alpha matte.png --output stack.npz
-///   drbokeh render --layers stack.npz --focus-at 320,200 --output out.png
+///   drbokeh layers --image examples/photo.png \
+///       --disparity examples/photo.disp.png -o stack.npz
+///   drbokeh layers --image photo.jpg --depth depth.exr --alpha matte.png \
+///       -o stack.npz
+///   drbokeh render --layers stack.npz --focus-at 300,150 -o out.png
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct LayersArgs {

@@ -6,6 +6,7 @@ mod bench_cmd;
 mod dfd;
 mod eval_cmd;
 mod layers_cmd;
+mod names;
 mod outputs;
 mod progress;
 mod render;
@@ -19,13 +20,19 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 /// Occlusion-aware, differentiable bokeh rendering (Dr.Bokeh).
 ///
 /// Renders a shallow depth of field from an all-in-focus image plus disparity (and an
-/// optional alpha matte), or from a layer stack. Start with:
+/// optional alpha matte), or from a layer stack. `drbokeh COMMAND --help` describes a
+/// command with examples (`-h`: the short form).
 ///
-///   drbokeh render --demo --output bokeh.png
+/// Examples:
+///   drbokeh render --demo -o bokeh.png
+///   drbokeh render --image examples/photo.png \
+///       --disparity examples/photo.disp.png -o out.png
+///   drbokeh render --help
 #[derive(Parser)]
 #[command(
     name = "drbokeh",
     version,
+    verbatim_doc_comment,
     propagate_version = true,
     max_term_width = 100
 )]
@@ -41,37 +48,34 @@ struct Cli {
     max_megapixels: Option<f64>,
 }
 
+// The variants carry no doc comments: a variant's doc comment would replace the help of
+// its arguments' struct (clap sets `about` and clears `long_about`), and it is the struct's
+// doc comment that holds each command's description and examples.
 #[derive(Subcommand)]
 enum Command {
-    /// Render lens blur from a layer stack, an image + disparity map, or the built-in demo.
     Render(Box<render::RenderArgs>),
-    /// Exact gradients of sum(G * render) w.r.t. colour, alpha, disparity, blur and focus.
     Vjp(Box<vjp::VjpArgs>),
-    /// Performance report: fast vs threaded vs reference engines on standard workloads.
     Bench(Box<bench_cmd::BenchArgs>),
-    /// Depth from defocus: recover disparity from an all-in-focus + defocused pair.
     Dfd(Box<dfd::DfdArgs>),
-    /// Depth-from-defocus experiment over synthetic pairs: layers x loss combinations.
     DfdEval(Box<dfd::DfdEvalArgs>),
-    /// Path-trace a billboard scene through a real (thick, spherical) lens: ground truth.
     Trace(Box<trace_cmd::TraceArgs>),
-    /// Make the ray-traced ground-truth benchmark.
     Benchmark(Box<trace_cmd::BenchmarkArgs>),
-    /// Decompose a photo (image + disparity, optional matte) into an inpainted layer stack.
     Layers(Box<layers_cmd::LayersArgs>),
-    /// Evaluate every method on a ray-traced benchmark: scores, tables, plots, HTML gallery.
     Eval(Box<eval_cmd::EvalArgs>),
-    /// Refocus gallery of image + disparity pairs, methods side by side (HTML).
     Gallery(Box<eval_cmd::GalleryArgs>),
 }
 
-fn main() {
-    // Negative numbers are values, not options: `--focus -1` reaches the range check.
-    let command = Cli::command().mut_subcommands(|c| {
+/// The command line as `main` parses it (negative numbers are values, not options:
+/// `--focus -1` reaches the range check).
+fn cli_command() -> clap::Command {
+    Cli::command().mut_subcommands(|c| {
         c.allow_negative_numbers(true)
             .mut_subcommands(|c| c.allow_negative_numbers(true))
-    });
-    let cli = match Cli::from_arg_matches(&command.get_matches()) {
+    })
+}
+
+fn main() {
+    let cli = match Cli::from_arg_matches(&cli_command().get_matches()) {
         Ok(cli) => cli,
         Err(e) => e.exit(),
     };
@@ -104,3 +108,6 @@ fn fail(e: &anyhow::Error) -> ! {
     eprintln!("drbokeh: error: {}", args::describe(e));
     std::process::exit(if values::is_usage_error(e) { 2 } else { 1 });
 }
+
+#[cfg(test)]
+mod help_tests;

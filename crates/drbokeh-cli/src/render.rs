@@ -9,13 +9,22 @@ use drbokeh::{Engine, Real};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Render lens blur.
+/// Render lens blur from a layer stack, an image + disparity map, or the built-in demo.
+///
+/// The scene is a layer stack (--layers), a photo with its disparity or depth map
+/// (--image with --disparity or --depth; decomposed into depth layers, or the paper's two
+/// layers with an --alpha matte), or the built-in demo (--demo). Focus with --focus (a
+/// disparity) or --focus-at (tap a pixel); --blur sets the blur strength.
 ///
 /// Examples:
-///   drbokeh render --demo --output bokeh.png
-///   drbokeh render --image photo.jpg --disparity disp.png --focus-at 320,200 --blur 20 --output out.png
-///   drbokeh render --image photo.jpg --depth depth.exr --alpha matte.png --aperture hexagon --output out.exr
-///   drbokeh render --layers stack.npz --preset paper --focus 0.4 --blur 30 --window 71 --output out.npy
+///   drbokeh render --demo -o bokeh.png
+///   drbokeh render --image examples/photo.png \
+///       --disparity examples/photo.disp.png --focus-at 300,150 -o out.png
+///   drbokeh render --image examples/photo.png \
+///       --disparity examples/photo.disp.png --aperture hexagon --blur 40 \
+///       -o out.exr
+///   drbokeh render --layers stack.npz --preset paper --focus 0.4 --blur 30 \
+///       --window 71 --f64 -o out.npy
 ///
 /// Output format follows the extension: .png (8-bit, or --bit-depth 16), .tif, .jpg, .exr
 /// (linear float) or .npy (float32 (H,W,3) display-encoded values, float64 with --f64;
@@ -80,6 +89,10 @@ fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     let t0 = Instant::now();
     let out = drbokeh::render(&stack, &settings, engine, &bar)?;
     bar.finish();
+    // The stack is not needed to encode: free it first, so that the peak is the render's
+    // (stack + output), not stack + output + encoder (docs/limits.md).
+    let (width, height, layers) = (stack.width, stack.height, stack.layers.len());
+    drop(stack);
     let cam = &settings.camera;
     let tone = settings.tone();
     let bit_depth = if a.bit_depth == 16 {
@@ -91,9 +104,9 @@ fn run_typed<T: Real>(a: &RenderArgs) -> Result<()> {
     if !a.exec.quiet {
         eprintln!(
             "drbokeh: rendered {}x{}, {} layer(s), focus {:.4}, K {}, L {} in {:.2} s -> {}",
-            stack.width,
-            stack.height,
-            stack.layers.len(),
+            width,
+            height,
+            layers,
             cam.focus_disparity,
             cam.blur_k,
             cam.window.size(),

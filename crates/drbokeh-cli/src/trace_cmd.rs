@@ -8,17 +8,20 @@ use drbokeh::trace::{self, benchmark, SceneSpec};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Path-trace a billboard scene through a thick spherical (or ideal thin) lens.
+/// Path-trace a billboard scene through a real (thick, spherical) lens: ground truth.
 ///
-/// Writes into DIR: bokeh.png (16-bit) and bokeh.exr (linear) — the ground-truth defocused
-/// image; aif.png/aif.exr — the all-in-focus image through the chief ray; depth.npy (mm),
-/// disparity.npy and disparity.png; layers.npz — the layered ground truth as a drbokeh
-/// layer stack (front first); scene.json — every parameter, including the renderer's
-/// equivalent `blur` (K) and `focus`. The directory appears only once complete.
+/// The lens is a thick spherical one (or an ideal thin lens). Writes into DIR: bokeh.png
+/// (16-bit) and bokeh.exr (linear) — the ground-truth defocused image; aif.png/aif.exr —
+/// the all-in-focus image through the chief ray; depth.npy (mm), disparity.npy and
+/// disparity.png; layers.npz — the layered ground truth as a drbokeh layer stack (front
+/// first); scene.json — every parameter, including the renderer's equivalent `blur` (K) and
+/// `focus`. The directory appears only once complete.
 ///
-/// Example:
-///   drbokeh trace examples/scene.json --out out/example
-///   drbokeh render --layers out/example/layers.npz --blur K --focus F --output r.png
+/// Examples (the summary line names the renderer's equivalent --blur and --focus):
+///   drbokeh trace examples/photo-scene.json -o photo-trace
+///   drbokeh render --layers photo-trace/layers.npz --blur 18.38 --focus 0.351 \
+///       -o r.png
+///   drbokeh trace examples/scene.json --spp 64 -o scene-trace --force
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct TraceArgs {
@@ -26,8 +29,8 @@ pub struct TraceArgs {
     #[arg(value_name = "SCENE.json")]
     pub scene: PathBuf,
 
-    /// Output directory (must not exist, unless --force).
-    #[arg(long, value_name = "DIR")]
+    /// Output directory (must not exist, unless --force). --out is an alias.
+    #[arg(long = "output", short = 'o', alias = "out", value_name = "DIR")]
     pub out: PathBuf,
 
     /// Samples per pixel (a perfect square); overrides the scene's render.spp.
@@ -51,8 +54,16 @@ pub struct TraceArgs {
     pub quiet: bool,
 }
 
-/// The ray-traced benchmark.
+/// Make the ray-traced ground-truth benchmark.
+///
+/// `drbokeh benchmark make --help` describes the scenes and options.
+///
+/// Examples:
+///   drbokeh benchmark make --scenes 4 --size 128 --spp 64 -o bench
+///   drbokeh benchmark make --scenes 100 --seed 1 --size 512 -o bench \
+///       --shard 0/10
 #[derive(Args, Debug)]
+#[command(verbatim_doc_comment)]
 pub struct BenchmarkArgs {
     #[command(subcommand)]
     pub command: BenchmarkCommand,
@@ -61,11 +72,13 @@ pub struct BenchmarkArgs {
 /// Benchmark subcommands.
 #[derive(Subcommand, Debug)]
 pub enum BenchmarkCommand {
-    /// Generate the seeded benchmark scenes (resumable, shardable).
+    // No doc comment: MakeArgs' doc comment is the help (see main.rs).
     Make(MakeArgs),
 }
 
-/// Generate the standard benchmark: procedural five-billboard scenes traced through a
+/// Generate the seeded benchmark scenes (resumable, shardable).
+///
+/// The standard benchmark: procedural five-billboard scenes traced through a
 /// thick spherical lens, blur radii from 4 to 40 px (at 512 px), focus on near, middle
 /// and far billboards.
 ///
@@ -74,8 +87,12 @@ pub enum BenchmarkCommand {
 /// interrupted run can be resumed; --shard k/n makes only scenes with index % n == k, so
 /// n machines can share the work (same seed, same bytes).
 ///
-/// Example:
-///   drbokeh benchmark make --scenes 100 --seed 1 --size 512 --out bench
+/// Examples:
+///   drbokeh benchmark make --scenes 4 --size 128 --spp 64 -o bench
+///   drbokeh benchmark make --scenes 100 --seed 1 --size 512 -o bench \
+///       --shard 0/10
+///   drbokeh benchmark make --scenes 24 --seed 202 --size 256 \
+///       --highlight-range 5:50 -o bench-bright
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct MakeArgs {
@@ -91,8 +108,8 @@ pub struct MakeArgs {
     #[arg(long, default_value_t = 512, value_name = "PX")]
     pub size: usize,
 
-    /// Output directory (created if missing).
-    #[arg(long, value_name = "DIR")]
+    /// Output directory (created if missing). --out is an alias.
+    #[arg(long = "output", short = 'o', alias = "out", value_name = "DIR")]
     pub out: PathBuf,
 
     /// Samples per pixel of the defocused images (a perfect square).
@@ -176,7 +193,7 @@ pub fn run_trace(a: &TraceArgs) -> Result<()> {
     } else {
         drbokeh::io::DirMode::New
     };
-    plan.dir(&a.out, "--out", mode).check()?;
+    plan.dir(&a.out, "--output", mode).check()?;
     spec.check_budget(&base_dir)
         .map_err(|e| e.in_file(&a.scene))?;
     let start = Instant::now();
@@ -265,7 +282,7 @@ fn run_make(a: &MakeArgs) -> Result<()> {
     }
     // Sweeps the temporaries of interrupted runs (scene directories being written).
     drbokeh::io::OutputPlan::new()
-        .dir(&a.out, "--out", drbokeh::io::DirMode::Merge)
+        .dir(&a.out, "--output", drbokeh::io::DirMode::Merge)
         .check()?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;

@@ -7,21 +7,25 @@ use clap::Args;
 use drbokeh::Real;
 use std::path::PathBuf;
 
-/// Vector-Jacobian product of the render: the gradient of `sum(G * render)`.
+/// Exact gradients of sum(G * render) w.r.t. colour, alpha, disparity, blur and focus.
 ///
-/// `render` is what `drbokeh render --output x.npy` writes with the same flags (display-encoded
-/// values). The output NPZ holds `rgb` (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W) and the
-/// scalars `blur` (d/dK) and `focus` (d/df); float64 with --f64. With --image/--disparity
-/// the image is decomposed into layers exactly as `render` does for the same focus and blur
-/// (one opaque layer with --single-layer), and N is that stack's layer count.
+/// The vector-Jacobian product of the render. `render` is what `drbokeh render -o x.npy`
+/// writes with the same flags (display-encoded values). The output NPZ holds `rgb`
+/// (N,H,W,3), `alpha` (N,H,W), `disparity` (N,H,W) and the scalars `blur` (d/dK) and
+/// `focus` (d/df); float64 with --f64. With --image/--disparity the image is decomposed
+/// into layers exactly as `render` does for the same focus and blur (one opaque layer
+/// with --single-layer), and N is that stack's layer count.
 ///
 /// --engine auto (the default) runs forward and backward on the fast engine in f32 (only the
 /// taps that can contribute; within 1e-5 of the exact gradient's largest value, tested) and
 /// on the threaded engine with --f64 (the exact gradient, every window tap); fast, threaded
 /// and reference choose explicitly (reference runs the threaded adjoint).
 ///
-/// Example:
-///   drbokeh vjp --layers stack.npz --grad-output g.npy --focus 0.4 --blur 30 --window 71 --f64 --output grads.npz
+/// Examples (the first writes a render to use as G):
+///   drbokeh render --demo --demo-size 160x107 -o g.npy
+///   drbokeh vjp --demo --demo-size 160x107 --grad-output g.npy -o grads.npz
+///   drbokeh vjp --layers stack.npz --grad-output g.npy --focus 0.4 --blur 30 \
+///       --window 71 --f64 -o grads.npz
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct VjpArgs {

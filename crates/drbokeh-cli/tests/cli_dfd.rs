@@ -41,7 +41,7 @@ fn dfd_writes_disparity_log_and_preview() {
         "0",
         "--finest-scale",
         "0",
-        "--layer",
+        "--method",
         "gausspsf",
         "--losses",
         "l1,smooth",
@@ -98,7 +98,14 @@ fn dfd_rejects_bad_input() {
         "{}",
         stderr(&o)
     );
-    let o = run(&["--defocused", p(&a), "--layer", "nope", "--output", p(&out)]);
+    let o = run(&[
+        "--defocused",
+        p(&a),
+        "--method",
+        "nope",
+        "--output",
+        p(&out),
+    ]);
     assert!(stderr(&o).contains("unknown layer"), "{}", stderr(&o));
     let o = run(&[
         "--defocused",
@@ -111,5 +118,57 @@ fn dfd_rejects_bad_input() {
         "{}",
         stderr(&o)
     );
+    assert!(!out.exists());
+}
+
+#[test]
+fn dfd_occlusion_layers_are_logged_and_checked() {
+    let d = tempfile::tempdir().unwrap();
+    let (a, b) = write_pair(d.path(), 32, 32);
+    let out = d.path().join("disp.png");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "dfd",
+            "--all-in-focus",
+            p(&a),
+            "--defocused",
+            p(&b),
+            "--focus",
+            "0",
+            "--blur",
+            "4",
+            "--fine-iterations",
+            "3",
+            "--patience",
+            "0",
+            "--finest-scale",
+            "0",
+            "--losses",
+            "l1,smooth",
+            "--output",
+            p(&out),
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        drbokeh(&args)
+    };
+    let o = run(&["--occlusion-layers", "3", "--redecompose-every", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let log: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap();
+    assert_eq!(log["layered"]["max_layers"], 3);
+    assert_eq!(log["layered"]["every"], 2);
+    assert_eq!(log["entries"].as_array().unwrap().len(), 3);
+    std::fs::remove_file(&out).unwrap();
+    let o = run(&["--redecompose-every", "2"]);
+    assert_eq!(o.status.code(), Some(2)); // a usage error
+    assert!(
+        stderr(&o).contains("--redecompose-every") && stderr(&o).contains("--occlusion-layers"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&["--occlusion-layers", "17"]);
+    assert_eq!(o.status.code(), Some(2)); // a usage error
+    assert!(stderr(&o).contains("--occlusion-layers"), "{}", stderr(&o));
     assert!(!out.exists());
 }

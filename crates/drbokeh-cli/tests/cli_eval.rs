@@ -25,7 +25,7 @@ fn make_bench(dir: &Path) {
         "--spp",
         "16",
         "--quiet",
-        "--out",
+        "--output",
         dir.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -41,7 +41,7 @@ fn eval_and_gallery_write_their_reports() {
         "eval",
         "--benchmark",
         bench.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
         "--methods",
         "gather,paper-gt",
@@ -87,7 +87,7 @@ fn eval_and_gallery_write_their_reports() {
         "3",
         "--blur",
         "8",
-        "--out",
+        "--output",
         gal.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -115,7 +115,7 @@ fn bad_inputs_fail_with_clear_messages() {
         "eval",
         "--benchmark",
         missing.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(1));
@@ -134,7 +134,7 @@ fn bad_inputs_fail_with_clear_messages() {
         "eval",
         "--benchmark",
         bench.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
         "--quiet",
     ]);
@@ -149,7 +149,7 @@ fn bad_inputs_fail_with_clear_messages() {
         "eval",
         "--benchmark",
         bench.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
         "--methods",
         "gather,magic",
@@ -169,7 +169,7 @@ fn bad_inputs_fail_with_clear_messages() {
         "gallery",
         "--images",
         missing.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(1));
@@ -178,7 +178,7 @@ fn bad_inputs_fail_with_clear_messages() {
         "gallery",
         "--images",
         bench.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(1));
@@ -209,7 +209,7 @@ fn photo_rows_render_what_the_cli_renders() {
         "--highlight-range",
         "5:50",
         "--quiet",
-        "--out",
+        "--output",
         bench.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -118,7 +118,7 @@ fn render_decomposes_by_default_and_matches_the_layers_command() {
         "-q",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    // Plain --highlight: the paper's boost for the photo (its default) and the stack alike.
+    // Plain --highlight: the paper's boost alone, for the photo and the stack alike.
     let camera = [
         "--focus",
         "0.0",

@@ -180,7 +180,7 @@ fn run_on(format: Format, path: &Path, dir: &Path) -> (Option<i32>, String) {
             p(path).into(),
             "--spp".into(),
             "1".into(),
-            "--out".into(),
+            "--output".into(),
             p(&dir.join("traced")).into(),
         ],
     };

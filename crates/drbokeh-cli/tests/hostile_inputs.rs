@@ -237,7 +237,7 @@ fn case2_scene_limits_are_checked_before_generating_anything() {
         let path = d.path(name);
         std::fs::write(&path, text).unwrap();
         let t = Instant::now();
-        let o = run(&["trace", p(&path), "--out", p(&d.path("out")), "-q"]);
+        let o = run(&["trace", p(&path), "--output", p(&d.path("out")), "-q"]);
         expect(&o, 1, words);
         assert!(
             t.elapsed() < Duration::from_secs(10),
@@ -267,26 +267,62 @@ fn case2_scene_limits_are_checked_before_generating_anything() {
 
 // ---- 3. Valid images above the decoder's default 512 MiB limit. ----
 
+/// Writes a 16-bit PNG of zeros (`rgba`: 4 channels, else RGB), streamed row by row.
+fn write_zero_png16(path: &std::path::Path, (w, h): (u32, u32), rgba: bool) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = png::Encoder::new(file, w, h);
+    enc.set_color(if rgba {
+        png::ColorType::Rgba
+    } else {
+        png::ColorType::Rgb
+    });
+    enc.set_depth(png::BitDepth::Sixteen);
+    enc.set_compression(png::Compression::Fast);
+    let mut writer = enc.write_header().unwrap().into_stream_writer().unwrap();
+    let row = vec![0u8; w as usize * if rgba { 8 } else { 6 }];
+    for _ in 0..h {
+        writer.write_all(&row).unwrap();
+    }
+    writer.finish().unwrap();
+}
+
+#[test]
+fn case3_issue_png_12000x8000_rgb16_decodes() {
+    // The issue's file: 12000 x 8000 RGB, 16 bits: 576 MB decoded (over the image crate's
+    // default 512 MiB), 96 megapixels (under the default budget as one layer). It must be
+    // decoded, and the command then fail on what is really wrong (the map's size), within
+    // the 2 GiB address-space cap: the 576 MB decode plus the 1152 MB float image.
+    let d = Dir::new();
+    let big = d.path("big.png");
+    write_zero_png16(&big, (12000, 8000), false);
+    let small = d.path("small.npy");
+    write_disparity(&small, 4, 4);
+    let o = run(&[
+        "render",
+        "--image",
+        p(&big),
+        "--disparity",
+        p(&small),
+        "--single-layer",
+        "-o",
+        p(&d.path("o.png")),
+    ]);
+    expect(
+        &o,
+        1,
+        &["small.npy", "size 4x4 does not match", "(12000x8000)"],
+    );
+    assert!(!stderr(&o).contains("Memory limit"), "{}", stderr(&o));
+    assert_eq!(d.names(), ["big.png", "small.npy"]);
+}
+
 #[test]
 fn case3_large_valid_png_decodes() {
     // 8192 x 8200 RGBA, 16 bits: 537.5 MB decoded, just over the image crate's default
     // limit of 512 MiB, well under the budget (67 megapixel-layers of 128).
     let d = Dir::new();
     let big = d.path("big.png");
-    {
-        let (w, h) = (8192u32, 8200u32);
-        let file = std::io::BufWriter::new(std::fs::File::create(&big).unwrap());
-        let mut enc = png::Encoder::new(file, w, h);
-        enc.set_color(png::ColorType::Rgba);
-        enc.set_depth(png::BitDepth::Sixteen);
-        enc.set_compression(png::Compression::Fast);
-        let mut writer = enc.write_header().unwrap().into_stream_writer().unwrap();
-        let row = vec![0u8; w as usize * 8];
-        for _ in 0..h {
-            writer.write_all(&row).unwrap();
-        }
-        writer.finish().unwrap();
-    }
+    write_zero_png16(&big, (8192, 8200), true);
     let small = d.path("small.npy");
     write_disparity(&small, 4, 4);
     // Decoding succeeds; the map's size is then what is wrong.
@@ -437,6 +473,9 @@ fn nits_usage_errors_exit_2_with_the_option_named() {
     expect(&o, 2, &["--focus", "must be in [0, 1], got -1"]);
     let o = with(&["--offset", "-0.5", "-o", p(&out)]);
     expect(&o, 2, &["--offset", "must be in [0, 1]"]);
+    // A negative coordinate is the value of --focus-at, not an unknown option.
+    let o = with(&["--focus-at", "-1,2", "-o", p(&out)]);
+    expect(&o, 2, &["invalid parameter --focus-at", "'-1,2'"]);
     // Bit depths: every bad value is a usage error; 16 bits with JPEG is refused.
     for bad in ["12", "32"] {
         let o = with(&["--bit-depth", bad, "-o", p(&out)]);
@@ -473,12 +512,12 @@ fn nits_usage_errors_exit_2_with_the_option_named() {
     let o = run(&[
         "dfd-eval",
         "--synthetic",
-        "--layers",
+        "--methods",
         "foo",
-        "--out",
+        "--output",
         p(&d.path("r")),
     ]);
-    expect(&o, 2, &["--layers", "unknown layer 'foo'"]);
+    expect(&o, 2, &["--methods", "unknown layer 'foo'"]);
     // bench --only with no match: refused at once.
     let t = Instant::now();
     let o = run(&["bench", "--only", "no-such-workload"]);
@@ -556,7 +595,7 @@ fn nits_messages_name_the_file_and_the_real_culprit() {
         ),
     )
     .unwrap();
-    let o = run(&["trace", p(&scene), "--out", p(&d.path("t")), "-q"]);
+    let o = run(&["trace", p(&scene), "--output", p(&d.path("t")), "-q"]);
     expect(&o, 1, &["tex.png", "gain", "overflow"]);
     assert!(!out.exists() && !d.path("t").exists());
 }

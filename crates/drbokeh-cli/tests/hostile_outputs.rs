@@ -358,10 +358,17 @@ fn case7_sigint_removes_temporaries_and_stale_ones_are_swept() {
 
     // SIGINT while eval is writing its report tree: the temporaries go, exit 130.
     let report = d.path("report");
-    let mut child = command(&["eval", "--benchmark", p(&bench), "--out", p(&report), "-q"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = command(&[
+        "eval",
+        "--benchmark",
+        p(&bench),
+        "--output",
+        p(&report),
+        "-q",
+    ])
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
     let t = Instant::now();
     let temp_seen = loop {
         if names(d.0.path()).iter().any(|n| n.starts_with(".drbokeh-")) {
@@ -390,11 +397,18 @@ fn case7_failures_leave_nothing_behind() {
     std::fs::write(&scene, scene_json(2, 16, false)).unwrap();
     let file = d.path("f.txt");
     std::fs::write(&file, b"keep").unwrap();
-    let o = run(&["trace", p(&scene), "--out", p(&file), "--force", "-q"]);
+    let o = run(&["trace", p(&scene), "--output", p(&file), "--force", "-q"]);
     expect(&o, 1, &["f.txt", "exists and is not a directory"]);
     assert_eq!(std::fs::read(&file).unwrap(), b"keep");
     // trace --force onto the directory holding the scene file: refused.
-    let o = run(&["trace", p(&scene), "--out", p(d.0.path()), "--force", "-q"]);
+    let o = run(&[
+        "trace",
+        p(&scene),
+        "--output",
+        p(d.0.path()),
+        "--force",
+        "-q",
+    ]);
     expect(&o, 1, &["would replace the input", "scene.json"]);
     assert_eq!(d.names(), ["f.txt", "scene.json"]);
 
@@ -403,12 +417,26 @@ fn case7_failures_leave_nothing_behind() {
     make_benchmark(&bench, 2, 24);
     std::fs::write(bench.join("scene_001/layers.npz"), b"not a zip").unwrap();
     let report = d.path("report");
-    let o = run(&["eval", "--benchmark", p(&bench), "--out", p(&report), "-q"]);
+    let o = run(&[
+        "eval",
+        "--benchmark",
+        p(&bench),
+        "--output",
+        p(&report),
+        "-q",
+    ]);
     expect(&o, 1, &["scene_001", "layers.npz"]);
     assert!(!report.exists());
     std::fs::create_dir(&report).unwrap();
     std::fs::write(report.join("mine.txt"), b"m").unwrap();
-    let o = run(&["eval", "--benchmark", p(&bench), "--out", p(&report), "-q"]);
+    let o = run(&[
+        "eval",
+        "--benchmark",
+        p(&bench),
+        "--output",
+        p(&report),
+        "-q",
+    ]);
     assert_eq!(o.status.code(), Some(1));
     assert_eq!(names(&report), ["mine.txt"]);
 
@@ -422,7 +450,7 @@ fn case7_failures_leave_nothing_behind() {
         "gallery",
         "--images",
         p(&photos),
-        "--out",
+        "--output",
         p(&gallery),
         "-q",
     ]);
@@ -432,4 +460,115 @@ fn case7_failures_leave_nothing_behind() {
         d.names(),
         ["bench", "f.txt", "photos", "report", "scene.json"]
     );
+}
+
+/// Spawns `render` of a 6-MP demo as a 16-bit PNG (light blur, so that encoding is a good
+/// part of the run) into `dir`.
+fn spawn_render(dir: &std::path::Path, out: &str) -> std::process::Child {
+    command(&[
+        "render",
+        "--demo",
+        "--demo-size",
+        "3000x2000",
+        "--blur",
+        "2",
+        "--window",
+        "5",
+        "--bit-depth",
+        "16",
+        "-o",
+        p(&dir.join(out)),
+        "-q",
+    ])
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap()
+}
+
+/// Waits until `dir` holds a `.drbokeh-*` temporary (the render is encoding its output);
+/// false if the child ended first or a minute passed.
+fn wait_for_temporary(dir: &std::path::Path, child: &mut std::process::Child) -> bool {
+    let t = Instant::now();
+    loop {
+        if names(dir).iter().any(|n| n.starts_with(".drbokeh-")) {
+            return true;
+        }
+        if t.elapsed() > Duration::from_secs(60) || child.try_wait().unwrap().is_some() {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+/// CPU time the process has used so far, from /proc (utime + stime, in clock ticks).
+fn cpu_ticks(pid: u32) -> u64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    let after = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = after.split_whitespace().collect();
+    let field = |i: usize| f.get(i).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+    field(11) + field(12)
+}
+
+#[test]
+fn case7_render_interrupted_leaves_nothing() {
+    // SIGTERM while rendering (before any output is staged): exit 143, nothing written.
+    let d = Dir::new();
+    let mut child = spawn_render(d.0.path(), "out.png");
+    let t = Instant::now();
+    while cpu_ticks(child.id()) < 20 && t.elapsed() < Duration::from_secs(60) {
+        assert!(child.try_wait().unwrap().is_none(), "render ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert!(child.try_wait().unwrap().is_none(), "render ended early");
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGTERM);
+    }
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(143), "{}", stderr(&o));
+    assert!(stderr(&o).contains("interrupted"), "{}", stderr(&o));
+    assert!(d.names().is_empty(), "{:?}", d.names());
+
+    // SIGINT while the output is being encoded into its temporary: exit 130, the temporary
+    // removed, no output.
+    let mut child = spawn_render(d.0.path(), "out.png");
+    assert!(
+        wait_for_temporary(d.0.path(), &mut child),
+        "render finished before it could be interrupted"
+    );
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGINT);
+    }
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(d.names().is_empty(), "{:?}", d.names());
+}
+
+#[test]
+fn case7_render_killed_leaves_a_temporary_the_next_render_sweeps() {
+    // SIGKILL cannot be caught: the temporary stays, and the next render writing to the
+    // same directory removes it (its process is gone).
+    let d = Dir::new();
+    let mut child = spawn_render(d.0.path(), "out.png");
+    assert!(
+        wait_for_temporary(d.0.path(), &mut child),
+        "render finished before it could be killed"
+    );
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let left = d.names();
+    assert!(
+        left.len() == 1 && left[0].starts_with(".drbokeh-") && left[0].ends_with(".part"),
+        "{left:?}"
+    );
+    let o = run(&[
+        "render",
+        "--demo",
+        "--demo-size",
+        "64x48",
+        "-o",
+        p(&d.path("again.png")),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(d.names(), ["again.png"]);
 }

@@ -60,7 +60,7 @@ fn trace_writes_every_output_and_a_reusable_record() {
     let o = drbokeh(&[
         "trace",
         scene.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
         "-q",
     ]);
@@ -97,7 +97,7 @@ fn trace_writes_every_output_and_a_reusable_record() {
     let o = drbokeh(&[
         "trace",
         out.join("scene.json").to_str().unwrap(),
-        "--out",
+        "--output",
         again.to_str().unwrap(),
         "-q",
     ]);
@@ -113,7 +113,7 @@ fn trace_writes_every_output_and_a_reusable_record() {
     let o = drbokeh(&[
         "trace",
         scene.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
         "-q",
     ]);
@@ -129,7 +129,7 @@ fn assert_fails_cleanly(scene_text: &str, expect: &str) {
     let o = drbokeh(&[
         "trace",
         scene.to_str().unwrap(),
-        "--out",
+        "--output",
         out.to_str().unwrap(),
         "-q",
     ]);
@@ -190,7 +190,7 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
         "--scenes", "3", "--seed", "7", "--size", "24", "--spp", "16", "-q",
     ];
     let run = |out: &Path, extra: &[&str]| {
-        let mut args = vec!["benchmark", "make", "--out", out.to_str().unwrap()];
+        let mut args = vec!["benchmark", "make", "--output", out.to_str().unwrap()];
         args.extend_from_slice(&common);
         args.extend_from_slice(extra);
         let o = drbokeh(&args);
@@ -227,7 +227,7 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
         .unwrap()
         .modified()
         .unwrap();
-    let mut args = vec!["benchmark", "make", "--out", full.to_str().unwrap()];
+    let mut args = vec!["benchmark", "make", "--output", full.to_str().unwrap()];
     args.extend_from_slice(&common[..common.len() - 1]);
     let o = drbokeh(&args);
     assert!(o.status.success());

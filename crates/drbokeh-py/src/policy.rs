@@ -70,8 +70,13 @@ impl ViewArgs<'_> {
             highlight: self.highlight,
             aperture: aperture_from(aperture)?,
             preset: self.preset.parse().or_raise()?,
-            // A photo's highlights as the CLI treats them by default (docs/highlights.md).
-            ..View::default()
+            // A photo's highlights as the CLI treats them (docs/highlights.md): its default
+            // without `highlight`, the paper's boost alone with it (as `--highlight`).
+            photo_highlights: if self.highlight {
+                drbokeh::highlight::PhotoHighlights::PaperBoost
+            } else {
+                drbokeh::highlight::PhotoHighlights::default()
+            },
         })
     }
 }

@@ -198,7 +198,7 @@ SCENE = {
 def test_trace_equals_cli(cli, tmp_path):
     scene = tmp_path / "scene.json"
     scene.write_text(json.dumps(SCENE))
-    cli("trace", scene, "--spp", "4", "--seed", "3", "--out", tmp_path / "out", "-q")
+    cli("trace", scene, "--spp", "4", "--seed", "3", "--output", tmp_path / "out", "-q")
     got = drbokeh.trace(scene, spp=4, seed=3)
     out = tmp_path / "out"
     for key in ("rgb", "alpha", "disparity"):
@@ -216,7 +216,7 @@ def test_trace_equals_cli(cli, tmp_path):
 
 def test_load_benchmark_equals_cli_files(cli, tmp_path):
     bench = tmp_path / "bench"
-    cli("benchmark", "make", "--scenes", "2", "--size", "24", "--spp", "4", "--out", bench, "-q")
+    cli("benchmark", "make", "--scenes", "2", "--size", "24", "--spp", "4", "--output", bench, "-q")
     scenes = list(drbokeh.load_benchmark(bench))
     assert [s["name"] for s in scenes] == ["scene_000", "scene_001"]
     for s in scenes:

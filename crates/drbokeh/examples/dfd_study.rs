@@ -55,6 +55,60 @@ fn main() {
         }
         return;
     }
+    if get("probe", "0") == "1" {
+        for path in &scenes {
+            let scene = SceneInputs::load(path).unwrap();
+            let mut s = RenderSettings::physical(scene.focus);
+            s.camera.blur_k = scene.blur_k;
+            s.camera.window = drbokeh::Window::auto_unclipped(scene.blur_k + 1.0);
+            let target = &scene.ground_truth;
+            let lossf = |r: &Image<f32>| -> (f64, f64) {
+                let c = Image::from_vec(
+                    r.width,
+                    r.height,
+                    3,
+                    r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+                )
+                .unwrap();
+                (
+                    drbokeh::loss::l1(&c, target).unwrap() as f64,
+                    drbokeh::loss::hssim(&c, target).unwrap() as f64,
+                )
+            };
+            let cam = scene.camera();
+            let oracle = drbokeh::baselines::flatten(&scene.layers, &cam).unwrap().0;
+            let gt = drbokeh::render(
+                &scene.layers,
+                &s,
+                drbokeh::Engine::Fast,
+                &drbokeh::NoProgress,
+            )
+            .unwrap();
+            let o = DfdOptions::new(s.clone(), RenderLayer::DrBokeh);
+            let est = estimate_disparity(&scene.aif, target, &o, &mut |_| {})
+                .unwrap()
+                .disparity;
+            let ml: usize = get("layers", "5").parse().unwrap();
+            let (l, hs) = lossf(&gt);
+            println!("{} true layers: L1 {l:.4} HSSIM {hs:.4}", scene.name);
+            for (an, aif) in [("png", &scene.aif), ("oracle", &oracle)] {
+                for (dn, d) in [("truth", &scene.disparity), ("est", &est)] {
+                    let single =
+                        drbokeh::dfd::render_layer(RenderLayer::DrBokeh, aif, d, &s).unwrap();
+                    let m = drbokeh::dfd::layered::LayeredModel::decompose(aif, d, ml).unwrap();
+                    let lay = m.render(drbokeh::Engine::Fast, aif, d, &s).unwrap();
+                    let (a, b) = lossf(&single);
+                    let (c, e) = lossf(&lay);
+                    println!(
+                        "{} aif {an} at {dn}: single L1 {a:.4} HSSIM {b:.4} | layered({}) L1 {c:.4} HSSIM {e:.4}",
+                        scene.name,
+                        m.layer_count()
+                    );
+                }
+            }
+        }
+        return;
+    }
     let mut maes = Vec::new();
     for path in &scenes {
         let scene = SceneInputs::load(path).unwrap();
@@ -93,6 +147,13 @@ fn main() {
             o.initial_disparity = Some(scene.disparity.clone());
         }
         o.engine = get("engine", "fast").parse().unwrap();
+        let nl: usize = get("layers", "0").parse().unwrap();
+        if nl > 0 {
+            o.layered = Some(drbokeh::dfd::LayeredObjective {
+                max_layers: nl,
+                every: get("every", "10").parse().unwrap(),
+            });
+        }
         let init = get("init", "sweep9");
         o.init = if let Some(n) = init.strip_prefix("sweep") {
             Init::Sweep(n.parse().unwrap())

@@ -23,7 +23,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("usage: highlight_sweep PRESET SPEC[,SPEC...] BENCHMARK...".into());
     }
     let preset: drbokeh::Preset = args[0].parse()?;
-    let specs: Vec<&str> = args[1].split(',').collect();
+    let specs: Vec<&str> = if args[1].contains(' ') {
+        args[1].split_whitespace().collect()
+    } else {
+        args[1].split(',').collect()
+    };
     for bench in &args[2..] {
         // (bucket -> (config -> PSNRs)); config "scatter" is the baseline.
         let mut table: BTreeMap<String, BTreeMap<String, Vec<f64>>> = BTreeMap::new();
@@ -43,6 +47,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let scatter = render_method(Method::Scatter, &scene)?;
             push("scatter", psnr(&scatter, &scene.ground_truth)?);
             for spec in &specs {
+                if let Some(mode) = spec.strip_prefix("oracle:") {
+                    let out = oracle(mode, &dir, &scene, preset)?;
+                    push(spec, psnr(&out, &scene.ground_truth)?);
+                    continue;
+                }
                 let mut view = View::default();
                 let (spec_core, single) = match spec.strip_suffix("/single") {
                     Some(c) => (c, true),
@@ -52,9 +61,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Some(c) => (c, true),
                     None => (spec_core, false),
                 };
+                let (spec_core, exr) = match spec_core.strip_prefix("exr") {
+                    Some(_) => ("off", true),
+                    None => (spec_core, false),
+                };
                 view.photo_highlights = PhotoHighlights::parse(spec_core)?;
                 let mut files = PhotoFiles::new(
-                    dir.join("aif.png"),
+                    dir.join(if exr { "aif.exr" } else { "aif.png" }),
                     dir.join("disparity.npy"),
                     DepthKind::Disparity,
                 );
@@ -87,6 +100,92 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// Analysis only: the photo with its clipped pixels (any channel >= 254.5/255) replaced
+/// from `aif.exr`: per pixel (`px`), or per 8-connected clipped region by its mean colour
+/// (`tint`) or mean grey (`white`); defocused pixels only (radius >= 2 px) with `+gate`.
+fn oracle(
+    mode: &str,
+    dir: &std::path::Path,
+    scene: &SceneInputs,
+    preset: drbokeh::Preset,
+) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
+    let png: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
+    let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
+    let cam = scene.camera();
+    let view = View {
+        photo_highlights: PhotoHighlights::Off,
+        gamma: cam.gamma,
+        preset,
+        ..View::default()
+    };
+    let tone = view.tone();
+    let (w, h) = (png.width, png.height);
+    let clipped: Vec<bool> = png
+        .data
+        .chunks_exact(3)
+        .map(|p| p.iter().any(|&v| v >= 254.5 / 255.0))
+        .collect();
+    let (mode, gate) = match mode.strip_suffix("+gate") {
+        Some(m) => (m, true),
+        None => (mode, false),
+    };
+    let mut out = png.clone();
+    let mut seen = vec![false; w * h];
+    for s in 0..w * h {
+        if !clipped[s] || seen[s] {
+            continue;
+        }
+        let mut reg = vec![];
+        let mut st = vec![s];
+        seen[s] = true;
+        while let Some(i) = st.pop() {
+            reg.push(i);
+            let (x, y) = (i % w, i / w);
+            for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    let j = ny * w + nx;
+                    if clipped[j] && !seen[j] {
+                        seen[j] = true;
+                        st.push(j);
+                    }
+                }
+            }
+        }
+        let mut m = [0.0f64; 3];
+        for &i in &reg {
+            for c in 0..3 {
+                m[c] += exr.data[3 * i + c].max(0.0) as f64 / reg.len() as f64;
+            }
+        }
+        let grey = (m[0] + m[1] + m[2]) / 3.0;
+        for &i in &reg {
+            let r = scene.blur_k * (scene.disparity.data[i] as f64 - scene.focus).abs();
+            if gate && r < 2.0 {
+                continue;
+            }
+            for c in 0..3 {
+                let lin = match mode {
+                    "px" => exr.data[3 * i + c].max(0.0) as f64,
+                    "tint" => m[c],
+                    _ => grey,
+                };
+                // never below the photo
+                let lin = lin.max(tone.linearize(png.data[3 * i + c] as f64));
+                out.data[3 * i + c] = tone.encode(lin) as f32;
+            }
+        }
+    }
+    let photo = drbokeh::scene::Photo {
+        rgb_encoded: out,
+        disparity: scene.disparity.clone(),
+        matte: None,
+        layering: Layering::Decompose { max_layers: 5 },
+    };
+    let mut img = render_photo_pipeline(preset, Source::Photo(photo), &cam, view)?;
+    img.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    Ok(img)
 }
 
 fn mean(v: &[f64]) -> f64 {

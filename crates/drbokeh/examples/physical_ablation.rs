@@ -10,7 +10,7 @@
 //!   cargo run --release -p drbokeh --example physical_ablation -- /tmp/pb7
 //!
 //! The measurement reported in `docs/physical.md` used
-//! `drbokeh benchmark make --scenes 16 --seed 7 --size 256 --spp 256 --out /tmp/pb7` (tuning)
+//! `drbokeh benchmark make --scenes 16 --seed 7 --size 256 --spp 256 --output /tmp/pb7` (tuning)
 //! and the same with `--seed 8` (held out).
 
 use drbokeh::eval::metrics::{psnr, ssim};

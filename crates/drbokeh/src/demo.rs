@@ -3,7 +3,9 @@
 //! - front (disparity 0.9): dark leaves and thin stems with soft, matting-like edges;
 //! - subject (disparity 0.55, the default focus): a striped, shaded ball on a stand;
 //! - background (disparity 0.05 to 0.15): a dusk gradient with small bright lights that
-//!   turn into bokeh balls.
+//!   turn into bokeh balls. The lights are high dynamic range, as real lights are: their
+//!   linear intensity is [`LIGHT_GAIN`] (6 to 30) times white, stored as display-encoded
+//!   values above 1 (`gain^(1/2.2)`), so that spread over a blur disc they stay bright.
 
 use crate::image::Image;
 use crate::stack::{Layer, LayerStack};
@@ -15,6 +17,12 @@ pub const DEMO_FOCUS: f64 = 0.55;
 pub const LAYERS: u64 = 3;
 /// The demo's default size.
 pub const DEMO_SIZE: (usize, usize) = (640, 426);
+
+/// The range of the demo lights' linear intensities, in units of white (1.0): a light
+/// of radius 2.5 px spread over a blur disc of radius 13.5 px (the default view) keeps
+/// about 1/30 of its intensity per pixel, so lights at 1.0 (clipped at white) would
+/// render as dim grey discs.
+pub const LIGHT_GAIN: (f64, f64) = (6.0, 30.0);
 
 /// A small deterministic hash to [0, 1) (no RNG crate needed for fixed content).
 fn hash01(i: u64) -> f64 {
@@ -142,10 +150,14 @@ pub fn scene<T: Real>(width: usize, height: usize) -> LayerStack<T> {
     let lights: Vec<(f64, f64, [f64; 3])> = (0..70)
         .map(|i| {
             let warm = hash01(i + 300);
+            let linear_gain = LIGHT_GAIN.0 + (LIGHT_GAIN.1 - LIGHT_GAIN.0) * hash01(i + 400);
+            // Display-encoded (gamma 2.2, the default view's transfer): above 1.
+            let encoded_gain = linear_gain.powf(1.0 / 2.2);
+            let col = [1.0, 0.75 + 0.25 * warm, 0.45 + 0.5 * (1.0 - warm)];
             (
                 wf * hash01(i + 100),
                 hf * (0.1 + 0.6 * hash01(i + 200)),
-                [1.0, 0.75 + 0.25 * warm, 0.45 + 0.5 * (1.0 - warm)],
+                col.map(|c| c * encoded_gain),
             )
         })
         .collect();
@@ -162,7 +174,8 @@ pub fn scene<T: Real>(width: usize, height: usize) -> LayerStack<T> {
             }
             *bg.disparity.at_mut(x, y, 0) = T::c(0.05 + 0.1 * v * v);
             for (c, val) in rgb.iter().enumerate() {
-                *bg.rgb_encoded.at_mut(x, y, c) = T::c(val.clamp(0.0, 1.0));
+                // Not clipped at 1: the lights are HDR.
+                *bg.rgb_encoded.at_mut(x, y, c) = T::c(val.max(0.0));
             }
         }
     }

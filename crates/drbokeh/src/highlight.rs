@@ -34,16 +34,25 @@ pub const CLIPPED_LEVEL: f64 = 254.5 / 255.0;
 
 /// How a display-encoded photo's highlights are treated ([`crate::scene::View`]); stacks,
 /// the demo and linear (EXR) photos are not touched by it.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PhotoHighlights {
     /// As the photo shows them.
     Off,
-    /// The paper's boost inside the model (docs/model.md, M20; the camera's `highlight`):
-    /// the default, the best of the settings measured in docs/highlights.md.
-    #[default]
+    /// The paper's boost inside the model (docs/model.md, M20; the camera's `highlight`).
     PaperBoost,
     /// Per-region recovery (this module).
     Recover(HighlightRecovery),
+    /// Per-region recovery with each region's gain and tint estimated from its rim
+    /// ([`HighlightEstimate`]), then the paper's boost: the default
+    /// ([`HighlightEstimate::DEFAULT`]), the best of the settings measured in
+    /// docs/highlights.md over both highlight ranges.
+    Estimate(HighlightEstimate),
+}
+
+impl Default for PhotoHighlights {
+    fn default() -> Self {
+        PhotoHighlights::Estimate(HighlightEstimate::DEFAULT)
+    }
 }
 
 impl PhotoHighlights {
@@ -52,8 +61,20 @@ impl PhotoHighlights {
         Ok(match spec.trim() {
             "off" => PhotoHighlights::Off,
             "paper" => PhotoHighlights::PaperBoost,
+            s if s == "auto" || s.starts_with("auto:") => {
+                PhotoHighlights::Estimate(HighlightEstimate::parse(s)?)
+            }
             s => PhotoHighlights::Recover(HighlightRecovery::parse(s)?),
         })
+    }
+
+    /// Whether the paper's boost (docs/model.md, M20) is on for a photo.
+    pub fn paper_boost(&self) -> bool {
+        match self {
+            PhotoHighlights::PaperBoost => true,
+            PhotoHighlights::Estimate(e) => e.paper,
+            PhotoHighlights::Off | PhotoHighlights::Recover(_) => false,
+        }
     }
 }
 
@@ -125,73 +146,380 @@ impl HighlightRecovery {
         tone: &Tone,
     ) -> Result<Image<T>> {
         self.validate()?;
-        if (disparity.width, disparity.height) != (rgb_encoded.width, rgb_encoded.height) {
-            return Err(Error::param(
-                "highlight",
-                "the disparity map and the image differ in size",
-            ));
-        }
-        if rgb_encoded.channels != 3 {
-            return Err(Error::param(
-                "highlight",
-                format!(
-                    "highlight recovery needs a 3-channel image, got {}",
-                    rgb_encoded.channels
-                ),
-            ));
-        }
+        check_inputs(rgb_encoded, disparity)?;
         let mut out = rgb_encoded.clone();
         let (w, h) = (rgb_encoded.width, rgb_encoded.height);
         if self.gain == 1.0 || w == 0 || h == 0 {
             return Ok(out);
         }
-        let value: Vec<f64> = rgb_encoded
-            .data
-            .chunks_exact(3)
-            .map(|p| p.iter().map(|v| v.f64()).fold(f64::NEG_INFINITY, f64::max))
-            .collect();
-        let t0 = self.threshold;
         let a_point = point_area_px(w, h);
-        let mut seen = vec![false; w * h];
-        let mut stack = Vec::new();
-        let mut region = Vec::new();
-        for start in 0..w * h {
-            if seen[start] || value[start].is_nan() || value[start] < t0 {
-                continue;
+        let gain = self.gain;
+        recover_regions(
+            rgb_encoded,
+            disparity,
+            focus_disparity,
+            blur_k,
+            tone,
+            self.threshold,
+            1.0,
+            &mut out,
+            |region, _value| {
+                let weight = (a_point / region.len() as f64).min(1.0);
+                (1.0 + (gain - 1.0) * weight, None)
+            },
+        );
+        Ok(out)
+    }
+}
+
+/// Per-region gain and tint estimated from the region's rim: `--highlight auto` (the
+/// default for photos; `auto:KEY=VALUE,...` to change its constants).
+///
+/// A clipped blob's edge falls from white to the background over the camera's edge
+/// spread; the brighter the source, the narrower the unclipped part of that fall (for a
+/// linear ramp of one pixel and a source `g` times white, the unclipped rim holds
+/// `1 / (2 g)` of light per unit of edge length). So with `x` the region's rim light (the
+/// unclipped pixels touching its clipped ones, linear, above the local background: the
+/// median of the ring 3-4 px out) per clipped edge pixel, the region's gain is
+/// `g = clamp(K / x, 1, GMAX)`. The rim's colour above the background is the source's
+/// tint (it is not clipped there): clipped pixels get `g` times that tint (normalised to
+/// its largest channel; blended towards white where the rim holds little light), never
+/// less than the photo shows. Clipped pixels on the region's edge are only partly covered
+/// by the source and get the share `edge` of `g - 1`. Bright unclipped pixels of the region
+/// ramp in as in [`HighlightRecovery`], and the defocus gate applies. With `paper`, the
+/// paper's boost (docs/model.md, M20) is applied on top in the model, as for `paper`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HighlightEstimate {
+    /// Rim constant `K` (> 0).
+    pub rim_k: f64,
+    /// Largest gain `GMAX` (>= 1).
+    pub max_gain: f64,
+    /// Display-encoded threshold of the region (as [`HighlightRecovery::threshold`]).
+    pub threshold: f64,
+    /// Whether clipped pixels take the rim's tint (else white).
+    pub tint: bool,
+    /// Share of the gain `g - 1` that the region's clipped edge pixels (a 4-neighbour not
+    /// clipped) get, in [0, 1]: they are partly covered by the source.
+    pub edge: f64,
+    /// Whether the paper's boost (docs/model.md, M20) is applied on top, in the model.
+    pub paper: bool,
+    /// Rim light (linear, per clipped edge pixel) that weighs as much as white in the
+    /// tint: the tint fades to white where the rim holds less light than this.
+    pub white_rim: f64,
+}
+
+impl HighlightEstimate {
+    /// The defaults of `auto` (and of photos), chosen on the tuning benchmarks of
+    /// docs/highlights.md (seeds 101 and 102, highlights 2-10 and 5-50).
+    pub const DEFAULT: HighlightEstimate = HighlightEstimate {
+        rim_k: 0.4,
+        max_gain: 3.0,
+        threshold: 0.9,
+        tint: true,
+        edge: 0.25,
+        paper: true,
+        white_rim: 0.01,
+    };
+
+    /// Parses `auto` or `auto:KEY=VALUE,...` with keys `k` (rim constant), `max` (largest
+    /// gain), `t` (threshold), `edge` (share of the gain on the clipped edge pixels), `tint`
+    /// (0 or 1), `paper` (0 or 1).
+    pub fn parse(spec: &str) -> Result<Self> {
+        let bad = || {
+            Error::param(
+                "highlight",
+                format!(
+                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edge, tint, paper; e.g. auto:k=0.3,max=8), got '{spec}'"
+                ),
+            )
+        };
+        let rest = match spec.trim().strip_prefix("auto") {
+            Some("") => "",
+            Some(r) => r.strip_prefix(':').ok_or_else(bad)?,
+            None => return Err(bad()),
+        };
+        let mut e = Self::DEFAULT;
+        for kv in rest.split(',').filter(|s| !s.trim().is_empty()) {
+            let (k, v) = kv.split_once('=').ok_or_else(bad)?;
+            let v: f64 = v.trim().parse().map_err(|_| bad())?;
+            match k.trim() {
+                "k" => e.rim_k = v,
+                "max" => e.max_gain = v,
+                "t" => e.threshold = v,
+                "edge" => e.edge = v,
+                "white" if v >= 0.0 && v.is_finite() => e.white_rim = v,
+                "tint" if v == 0.0 || v == 1.0 => e.tint = v == 1.0,
+                "paper" if v == 0.0 || v == 1.0 => e.paper = v == 1.0,
+                _ => return Err(bad()),
             }
-            // Flood the 8-connected bright region holding `start`.
-            region.clear();
-            seen[start] = true;
-            stack.push(start);
-            while let Some(i) = stack.pop() {
-                region.push(i);
-                let (x, y) = (i % w, i / w);
-                for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                    for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                        let j = ny * w + nx;
-                        if !seen[j] && value[j] >= t0 {
-                            seen[j] = true;
-                            stack.push(j);
-                        }
-                    }
-                }
+        }
+        e.validate()?;
+        Ok(e)
+    }
+
+    /// Checks `K > 0`, `1 <= GMAX <= 1000`, `0 < THRESHOLD < 1`.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.rim_k.is_finite() && self.rim_k > 0.0 && self.rim_k <= 1000.0) {
+            return Err(Error::param(
+                "highlight",
+                format!("the rim constant must be in (0, 1000], got {}", self.rim_k),
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.edge) {
+            return Err(Error::param(
+                "highlight",
+                format!("the edge share must be in [0, 1], got {}", self.edge),
+            ));
+        }
+        HighlightRecovery {
+            gain: self.max_gain,
+            threshold: self.threshold,
+        }
+        .validate()
+    }
+
+    /// As [`HighlightRecovery::apply`], with each region's gain and tint estimated from
+    /// its rim.
+    pub fn apply<T: Real>(
+        &self,
+        rgb_encoded: &Image<T>,
+        disparity: &Image<T>,
+        focus_disparity: f64,
+        blur_k: f64,
+        tone: &Tone,
+    ) -> Result<Image<T>> {
+        self.validate()?;
+        check_inputs(rgb_encoded, disparity)?;
+        let mut out = rgb_encoded.clone();
+        let (w, h) = (rgb_encoded.width, rgb_encoded.height);
+        if w == 0 || h == 0 {
+            return Ok(out);
+        }
+        let lin: Vec<f64> = rgb_encoded
+            .data
+            .iter()
+            .map(|v| tone.linearize(v.f64().max(0.0)))
+            .collect();
+        let est = *self;
+        let mut mark = vec![0u32; w * h];
+        let mut stamp = 1u32;
+        recover_regions(
+            rgb_encoded,
+            disparity,
+            focus_disparity,
+            blur_k,
+            tone,
+            self.threshold,
+            self.edge,
+            &mut out,
+            |region, value| {
+                stamp += 4;
+                let (g, tint) = est.estimate(region, value, &lin, w, h, &mut mark, stamp);
+                (g, Some(tint))
+            },
+        );
+        Ok(out)
+    }
+
+    /// (gain, tint) of one region; `mark` is scratch, values `stamp..stamp + 4` unused
+    /// before this call.
+    #[allow(clippy::too_many_arguments)]
+    fn estimate(
+        &self,
+        region: &[usize],
+        value: &[f64],
+        lin: &[f64],
+        w: usize,
+        h: usize,
+        mark: &mut [u32],
+        stamp: u32,
+    ) -> (f64, [f64; 3]) {
+        let (far_m, near_m, clip_m, rim_m) = (stamp, stamp + 1, stamp + 2, stamp + 3);
+        let around = |i: usize, r: usize| {
+            let (x, y) = (i % w, i / w);
+            let ys = y.saturating_sub(r)..=(y + r).min(h - 1);
+            let xs = x.saturating_sub(r)..=(x + r).min(w - 1);
+            ys.flat_map(move |ny| xs.clone().map(move |nx| ny * w + nx))
+        };
+        // Background ring: 3-4 px out.
+        for &i in region {
+            for j in around(i, 4) {
+                mark[j] = far_m;
             }
-            if !region.iter().any(|&i| value[i] >= CLIPPED_LEVEL) {
-                continue;
+        }
+        for &i in region {
+            for j in around(i, 2) {
+                mark[j] = near_m;
             }
-            let weight = (a_point / region.len() as f64).min(1.0);
-            let g = 1.0 + (self.gain - 1.0) * weight;
-            for &i in &region {
-                let t = ((value[i] - t0) / (1.0 - t0)).clamp(0.0, 1.0);
-                let radius_px = blur_k * (disparity.data[i].f64() - focus_disparity).abs();
-                let factor = 1.0 + (g - 1.0) * smoothstep(t) * defocus_gate(radius_px);
-                for v in &mut out.data[3 * i..3 * i + 3] {
-                    let lin = tone.linearize(v.f64().max(0.0));
-                    *v = T::c(tone.encode(lin * factor).max(0.0));
+        }
+        let mut ring = Vec::new();
+        for &i in region {
+            for j in around(i, 4) {
+                if mark[j] == far_m {
+                    ring.push(j);
+                    mark[j] = near_m;
                 }
             }
         }
-        Ok(out)
+        let mut bg = [0.0; 3];
+        for (c, b) in bg.iter_mut().enumerate() {
+            let mut v: Vec<f64> = ring.iter().map(|&j| lin[3 * j + c]).collect();
+            v.sort_by(f64::total_cmp);
+            *b = v.get(v.len() / 2).copied().unwrap_or(0.0);
+        }
+        for &i in region {
+            if value[i] >= CLIPPED_LEVEL {
+                mark[i] = clip_m;
+            }
+        }
+        let mut edge = 0usize;
+        let mut rim = [0.0; 3];
+        let mut rim_seen = Vec::new();
+        let clipped: Vec<usize> = region
+            .iter()
+            .copied()
+            .filter(|&i| value[i] >= CLIPPED_LEVEL)
+            .collect();
+        for &i in &clipped {
+            let (x, y) = (i % w, i / w);
+            let on_edge = [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|&(dx, dy)| {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    nx < 0
+                        || ny < 0
+                        || nx >= w as i64
+                        || ny >= h as i64
+                        || mark[ny as usize * w + nx as usize] != clip_m
+                });
+            edge += on_edge as usize;
+            for j in around(i, 1) {
+                if mark[j] != clip_m && mark[j] != rim_m {
+                    rim_seen.push(j);
+                    mark[j] = rim_m;
+                }
+            }
+        }
+        for &j in &rim_seen {
+            for c in 0..3 {
+                rim[c] += (lin[3 * j + c] - bg[c]).max(0.0);
+            }
+        }
+        let rim_light = (rim[0] + rim[1] + rim[2]) / 3.0;
+        let x = rim_light / edge.max(1) as f64;
+        let g = (self.rim_k / x.max(1e-6)).clamp(1.0, self.max_gain);
+        let tint = if self.tint {
+            // Towards white where the rim holds little light.
+            let eps = self.white_rim * edge.max(1) as f64 + 1e-12;
+            let m = rim.iter().copied().fold(0.0, f64::max) + eps;
+            [(rim[0] + eps) / m, (rim[1] + eps) / m, (rim[2] + eps) / m]
+        } else {
+            [1.0; 3]
+        };
+        (g, tint)
+    }
+}
+
+fn check_inputs<T: Real>(rgb_encoded: &Image<T>, disparity: &Image<T>) -> Result<()> {
+    if (disparity.width, disparity.height) != (rgb_encoded.width, rgb_encoded.height) {
+        return Err(Error::param(
+            "highlight",
+            "the disparity map and the image differ in size",
+        ));
+    }
+    if rgb_encoded.channels != 3 {
+        return Err(Error::param(
+            "highlight",
+            format!(
+                "highlight recovery needs a 3-channel image, got {}",
+                rgb_encoded.channels
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Finds the clipped regions of `rgb_encoded` (threshold `t0`) and scales each pixel's
+/// linear colour by `g` (tint `None`) or towards `g tint` (per channel, never below the
+/// photo's), with `(g, tint)` from `gain_of(region, value)`, ramped by `s(t)` and the
+/// defocus gate; writes `out`.
+#[allow(clippy::too_many_arguments)]
+fn recover_regions<T: Real>(
+    rgb_encoded: &Image<T>,
+    disparity: &Image<T>,
+    focus_disparity: f64,
+    blur_k: f64,
+    tone: &Tone,
+    t0: f64,
+    edge_share: f64,
+    out: &mut Image<T>,
+    mut gain_of: impl FnMut(&[usize], &[f64]) -> (f64, Option<[f64; 3]>),
+) {
+    let (w, h) = (rgb_encoded.width, rgb_encoded.height);
+    let value: Vec<f64> = rgb_encoded
+        .data
+        .chunks_exact(3)
+        .map(|p| p.iter().map(|v| v.f64()).fold(f64::NEG_INFINITY, f64::max))
+        .collect();
+    let mut seen = vec![false; w * h];
+    let mut stack = Vec::new();
+    let mut region = Vec::new();
+    for start in 0..w * h {
+        if seen[start] || value[start].is_nan() || value[start] < t0 {
+            continue;
+        }
+        // Flood the 8-connected bright region holding `start`.
+        region.clear();
+        seen[start] = true;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            region.push(i);
+            let (x, y) = (i % w, i / w);
+            for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    let j = ny * w + nx;
+                    if !seen[j] && value[j] >= t0 {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        if !region.iter().any(|&i| value[i] >= CLIPPED_LEVEL) {
+            continue;
+        }
+        let (g_region, tint) = gain_of(&region, &value);
+        for &i in &region {
+            let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
+            let (x, y) = (i % w, i / w);
+            let on_edge = clipped(i)
+                && (x == 0
+                    || y == 0
+                    || x + 1 == w
+                    || y + 1 == h
+                    || !clipped(i - 1)
+                    || !clipped(i + 1)
+                    || !clipped(i - w)
+                    || !clipped(i + w));
+            let g = if on_edge {
+                1.0 + (g_region - 1.0) * edge_share
+            } else {
+                g_region
+            };
+            let t = ((value[i] - t0) / (1.0 - t0)).clamp(0.0, 1.0);
+            let radius_px = blur_k * (disparity.data[i].f64() - focus_disparity).abs();
+            let ramp = smoothstep(t) * defocus_gate(radius_px);
+            for (c, v) in out.data[3 * i..3 * i + 3].iter_mut().enumerate() {
+                let lin = tone.linearize(v.f64().max(0.0));
+                let new = match tint {
+                    // The gain on every channel: the hue is kept.
+                    None => lin * (1.0 + (g - 1.0) * ramp),
+                    // Towards `g tint`, never below the photo.
+                    Some(tint) => lin + ((g * tint[c]).max(lin) - lin) * ramp,
+                };
+                *v = T::c(tone.encode(new).max(0.0));
+            }
+        }
     }
 }
 
@@ -296,5 +624,100 @@ mod tests {
         let id = HighlightRecovery { gain: 1.0, ..r };
         assert_eq!(id.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap(), img);
         assert!((defocus_gate(0.5), defocus_gate(2.0), defocus_gate(5.0)) == (0.0, 0.5, 1.0));
+    }
+    #[test]
+    fn estimate_reads_gain_and_tint_from_the_rim() {
+        // Two clipped 4x4 blobs on a grey background, defocused by 30 px: blob A with a
+        // rim barely above the background (a bright source: its edge falls fast), blob B
+        // with a brighter orange rim (a dimmer source). Linear values.
+        let (w, h) = (48, 24);
+        let bg = 0.05;
+        let mut lin = vec![bg; w * h * 3];
+        let mut put = |x: usize, y: usize, c: [f64; 3]| {
+            lin[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&c);
+        };
+        for (x0, rim) in [(8usize, [0.07; 3]), (32, [0.2, 0.1, 0.06])] {
+            for y in 8..16 {
+                for x in x0..x0 + 8 {
+                    let inner = (x0 + 2..x0 + 6).contains(&x) && (10..14).contains(&y);
+                    put(x, y, if inner { [1.0; 3] } else { rim });
+                }
+            }
+        }
+        let tone = tone();
+        let mut img = Image::<f64>::new(w, h, 3);
+        for (v, l) in img.data.iter_mut().zip(&lin) {
+            *v = tone.encode(*l);
+        }
+        let mut disp = Image::<f64>::new(w, h, 1);
+        disp.data.iter_mut().for_each(|v| *v = 1.0);
+        let est = HighlightEstimate {
+            rim_k: 0.3,
+            max_gain: 8.0,
+            edge: 1.0,
+            white_rim: 0.05,
+            ..HighlightEstimate::DEFAULT
+        };
+        let out = est.apply(&img, &disp, 0.0, 30.0, &tone).unwrap();
+        let at = |im: &Image<f64>, x: usize, y: usize, c: usize| {
+            tone.linearize(im.data[3 * (y * w + x) + c])
+        };
+        // Interior pixels of the blobs (not on the clipped edge).
+        let (a, b) = (at(&out, 11, 11, 0), at(&out, 35, 11, 0));
+        assert!(a > 2.0 * b, "bright-source blob {a} vs dim-source blob {b}");
+        assert!(b > 1.5, "a clipped blob is recovered above white: {b}");
+        assert!(
+            (a - est.max_gain).abs() < 1e-9,
+            "capped at the largest gain: {a}"
+        );
+        // B takes its rim's orange tint (red well above green, green >= blue), never
+        // below the photo's white.
+        let (r, g, bl) = (
+            at(&out, 35, 11, 0),
+            at(&out, 35, 11, 1),
+            at(&out, 35, 11, 2),
+        );
+        assert!(r > 1.5 * g && g >= bl && bl >= 1.0 - 1e-9, "{r} {g} {bl}");
+        // The clipped edge pixels get the share `edge` of the gain.
+        let half = HighlightEstimate { edge: 0.5, ..est };
+        let out_half = half.apply(&img, &disp, 0.0, 30.0, &tone).unwrap();
+        let edge_px = at(&out_half, 10, 10, 0);
+        assert!(
+            (edge_px - (1.0 + 0.5 * (a - 1.0))).abs() < 1e-9,
+            "{edge_px}"
+        );
+        assert_eq!(at(&out_half, 11, 11, 0), a);
+        // The background and the unclipped rim outside the threshold are untouched.
+        assert_eq!(at(&out, 0, 0, 0), at(&img, 0, 0, 0));
+        // In focus: nothing changes.
+        let focused = est.apply(&img, &disp, 1.0, 30.0, &tone).unwrap();
+        assert_eq!(focused, img);
+        // Parsing.
+        assert_eq!(
+            PhotoHighlights::parse("auto").unwrap(),
+            PhotoHighlights::Estimate(HighlightEstimate::DEFAULT)
+        );
+        let e =
+            HighlightEstimate::parse("auto:k=0.5,max=4,edge=0.5,tint=0,paper=0,white=0.1").unwrap();
+        assert_eq!(
+            (e.rim_k, e.max_gain, e.edge, e.tint, e.paper, e.white_rim),
+            (0.5, 4.0, 0.5, false, false, 0.1)
+        );
+        assert!(PhotoHighlights::parse("auto").unwrap().paper_boost());
+        assert!(!PhotoHighlights::parse("auto:paper=0")
+            .unwrap()
+            .paper_boost());
+        for bad in [
+            "auto:k",
+            "auto:k=0",
+            "auto:tint=2",
+            "auto:white=-1",
+            "auto:max=0.5",
+            "auto:edge=2",
+            "auto:x=1",
+            "autox",
+        ] {
+            assert!(PhotoHighlights::parse(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -347,7 +347,7 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
     };
     let (mut settings, note) = view.settings_for(&stack, engine)?;
     notes.extend(note);
-    if is_photo && view.photo_highlights == PhotoHighlights::PaperBoost {
+    if is_photo && view.photo_highlights.paper_boost() {
         settings.camera.highlight = true;
     }
     Ok(Scene {
@@ -378,6 +378,18 @@ fn photo_stack<T: Real>(
             let (settings, _) = view.settings_for(&probe, engine)?;
             let cam = &settings.camera;
             r.apply(
+                &rgb_encoded,
+                &disparity,
+                cam.focus_disparity,
+                cam.blur_k,
+                &view.tone(),
+            )?
+        }
+        PhotoHighlights::Estimate(e) => {
+            let probe = LayerStack::single(rgb_encoded.clone(), disparity.clone())?;
+            let (settings, _) = view.settings_for(&probe, engine)?;
+            let cam = &settings.camera;
+            e.apply(
                 &rgb_encoded,
                 &disparity,
                 cam.focus_disparity,

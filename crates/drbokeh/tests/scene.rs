@@ -304,10 +304,10 @@ fn photo_highlights_apply_to_photos_only() {
         photo_highlights,
         ..View::default()
     };
-    // Default: the paper's boost for a photo, not for a stack.
+    // Default: the rim estimate with the paper's boost for a photo, not for a stack.
     assert_eq!(
         View::default().photo_highlights,
-        PhotoHighlights::PaperBoost
+        PhotoHighlights::Estimate(drbokeh::highlight::HighlightEstimate::DEFAULT)
     );
     let s = scene::resolve(
         photo(Layering::SingleLayer),
@@ -316,7 +316,15 @@ fn photo_highlights_apply_to_photos_only() {
     )
     .unwrap();
     assert!(s.settings.camera.highlight);
-    assert_eq!(s.stack.layers[0].rgb_encoded, rgb);
+    {
+        // The defocused clipped 2x2 blob (all edge pixels, a rim at the background: the
+        // largest gain, 3, of which the edge share 0.25) is recovered; the rest is kept.
+        let got = &s.stack.layers[0].rgb_encoded;
+        let tone = view(PhotoHighlights::Off).tone();
+        let lin = tone.linearize(got.data[3 * (5 * w + 3)] as f64);
+        assert!((lin - 1.5).abs() < 1e-4, "{lin}");
+        assert_eq!(got.data[0], 0.3);
+    }
     let stack = LayerStack::single(rgb.clone(), disparity.clone()).unwrap();
     let s = scene::resolve(
         Source::Stack(stack),

@@ -98,6 +98,46 @@ fn spans_match_fast_with_focus_and_blur_side_by_side() {
     }
 }
 
+/// Layers whose radii repeat, where sources (and coverage receivers) of equal radius share
+/// one disc profile: a soft-edged front at constant disparity over a background that is
+/// constant along rows, and a layer alternating between a large and a small radius column
+/// by column (sources of equal radius separated by sources that do not reach the row).
+fn repeated_radii(w: usize, h: usize) -> LayerStack<f32> {
+    let mut front = Layer::<f32>::constant(w, h, [0.9, 0.4, 0.1], 0.0, 0.8);
+    let mut mid = Layer::<f32>::constant(w, h, [0.2, 0.7, 0.3], 0.0, 0.5);
+    let mut back = Layer::<f32>::constant(w, h, [0.0; 3], 1.0, 0.1);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let r = ((x as f32 - 30.0).powi(2) + (y as f32 - 40.0).powi(2)).sqrt();
+            front.alpha.data[i] = (0.5 - (r - 14.0) / 3.0).clamp(0.0, 1.0);
+            mid.alpha.data[i] = if (x / 9 + y / 11) % 3 == 0 { 0.6 } else { 0.0 };
+            mid.disparity.data[i] = if x % 2 == 0 { 0.75 } else { 0.52 };
+            for c in 0..3 {
+                back.rgb_encoded.data[3 * i + c] = ((x / 4 + y / 6 + c) % 3) as f32 / 2.0;
+            }
+            back.disparity.data[i] = 0.1 + 0.3 * (y / 3) as f32 / h as f32;
+        }
+    }
+    LayerStack::new(vec![front, mid, back]).unwrap()
+}
+
+#[test]
+fn spans_match_fast_where_radii_repeat() {
+    let stack = repeated_radii(90, 84);
+    for (focus, k) in [(0.5, 30.0), (0.45, 60.0)] {
+        for aperture in apertures().into_iter().take(2) {
+            for s in presets(settings(focus, k, 61, aperture.clone())) {
+                check(
+                    &stack,
+                    &s,
+                    &format!("repeated radii f {focus} K {k} {aperture:?} {:?}", s.preset),
+                );
+            }
+        }
+    }
+}
+
 /// Odd and tiny sizes (single rows and columns, fewer pixels than the blur radius), where
 /// every pixel is an edge pixel and the mirror padding holds most of the disc.
 #[test]

@@ -199,7 +199,7 @@ pub fn make_benchmark(dir: &Path, scenes: usize, size: usize) {
         &size.to_string(),
         "--spp",
         "1",
-        "--out",
+        "--output",
         p(dir),
         "-q",
     ]);

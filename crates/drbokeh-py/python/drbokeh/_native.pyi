@@ -166,7 +166,10 @@ def render_image(
     (a matte ``(H, W)``) the stack is the paper's two layers; with ``single_layer`` one
     opaque layer; otherwise up to ``max_layers`` (default 5) depth layers cut for this
     focus and blur. ``focus``: a disparity; ``focus_at=(x, y)``: the disparity seen at that
-    pixel; neither: the centre pixel's. Notes are issued as :class:`DrBokehWarning`."""
+    pixel; neither: the centre pixel's. A display-encoded photo's clipped highlights are
+    recovered as the command line's default does (``--highlight auto``, docs/highlights.md);
+    ``highlight=True`` uses the paper's boost alone (``--highlight``). Notes are issued as
+    :class:`DrBokehWarning`."""
 
 def decompose(
     image: FloatArray,

@@ -106,6 +106,9 @@ pub struct RunOptions {
     pub initial_disparity_given: bool,
     /// Engine of the Dr.Bokeh layer.
     pub engine: String,
+    /// The occlusion-aware objective (absent: one opaque layer).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layered: Option<super::LayeredObjective>,
 }
 
 impl RunOptions {
@@ -126,6 +129,7 @@ impl RunOptions {
             init: options.init,
             initial_disparity_given: options.initial_disparity.is_some(),
             engine: format!("{:?}", options.engine).to_lowercase(),
+            layered: options.layered,
         }
     }
 }

@@ -26,6 +26,7 @@
 pub mod benchmark;
 pub mod experiment;
 mod highlights;
+pub mod layered;
 pub mod layers;
 pub mod log;
 mod maps;
@@ -47,6 +48,9 @@ use serde::{Deserialize, Serialize};
 
 /// Weight of the edge-aware smoothness in [`LossWeights::DEFAULT`].
 pub const DEFAULT_SMOOTHNESS_WEIGHT: f64 = 20.0;
+
+/// Default [`LayeredObjective::every`].
+pub const DEFAULT_REDECOMPOSE_EVERY: usize = 10;
 
 /// Weights of the three loss terms; 0 turns a term off.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -216,6 +220,19 @@ impl std::str::FromStr for Highlights {
     }
 }
 
+/// The occlusion-aware objective of the Dr.Bokeh layer (`layered.rs`): the all-in-focus
+/// image is rendered as the layer stack that the photo pipeline makes of it at the current
+/// disparity estimate (depth layers, each filled in behind the nearer ones), re-made every
+/// [`LayeredObjective::every`] iterations; the GaussPSF and aperture layers ignore it
+/// (single-layer models by design).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayeredObjective {
+    /// Most layers of the decomposition (1 to 16).
+    pub max_layers: usize,
+    /// Iterations between re-decompositions (at least 1).
+    pub every: usize,
+}
+
 /// How the disparity starts.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -331,6 +348,9 @@ pub struct DfdOptions {
     pub initial_disparity: Option<Image<f32>>,
     /// Engine of the Dr.Bokeh layer's forward and adjoint ([`crate::render_with_tape_on`]).
     pub engine: Engine,
+    /// Render the Dr.Bokeh layer's objective through a layer decomposition (`None`: one
+    /// opaque layer).
+    pub layered: Option<LayeredObjective>,
 }
 
 impl DfdOptions {
@@ -367,6 +387,7 @@ impl DfdOptions {
             init: Init::Sweep(9),
             initial_disparity: None,
             engine: Engine::Fast,
+            layered: None,
         }
     }
 
@@ -419,6 +440,14 @@ impl DfdOptions {
                     "losses",
                     format!("weight of {name} must be finite and >= 0, got {w}"),
                 ));
+            }
+        }
+        if let Some(l) = self.layered {
+            if !(1..=crate::layering::MAX_LAYERS_LIMIT).contains(&l.max_layers) {
+                return Err(Error::param("occlusion_layers", "must be between 1 and 16"));
+            }
+            if l.every == 0 || l.every > 100_000 {
+                return Err(Error::param("redecompose", "must be between 1 and 100000"));
             }
         }
         match self.init {

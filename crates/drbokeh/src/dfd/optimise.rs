@@ -1,5 +1,6 @@
 //! The coarse-to-fine Adam loop of [`estimate_disparity`].
 
+use super::layered::LayeredModel;
 use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
 use super::maps::{
     box_mean, dilate, encode_image, pool, pool_adjoint, to_image, upsample, weighted_median,
@@ -395,6 +396,10 @@ pub fn estimate_disparity<T: Real>(
         let mut iterations = 0;
         let mut plateau = false;
         let mut last_loss = f64::NAN;
+        let layered = options
+            .layered
+            .filter(|_| options.layer == super::RenderLayer::DrBokeh);
+        let mut model: Option<LayeredModel<T>> = None;
         for it in 0..max_iters {
             let disp: Vec<f64> = p.iter().map(|&v| param.to_disparity(v)).collect();
             let disp_img: Image<T> = to_image(&disp, lw, lh, 1);
@@ -408,15 +413,32 @@ pub fn estimate_disparity<T: Real>(
                 smoothness: None,
                 structure: None,
             };
-            let vjp = render_layer_vjp_on(
-                options.layer,
-                options.engine,
-                &aif,
-                &disp_img,
-                &settings,
-                model_highlights && !clipped_idx.is_empty(),
-                |render: &Image<T>| objective.evaluate(render, &mut entry),
-            )?;
+            if let Some(l) = layered {
+                if it % l.every == 0 {
+                    model = Some(LayeredModel::decompose(&aif, &disp_img, l.max_layers)?);
+                }
+            }
+            let colour_gradient = model_highlights && !clipped_idx.is_empty();
+            let upstream = |render: &Image<T>| objective.evaluate(render, &mut entry);
+            let vjp = match &model {
+                Some(m) => m.vjp(
+                    options.engine,
+                    &aif,
+                    &disp_img,
+                    &settings,
+                    colour_gradient,
+                    upstream,
+                )?,
+                None => render_layer_vjp_on(
+                    options.layer,
+                    options.engine,
+                    &aif,
+                    &disp_img,
+                    &settings,
+                    colour_gradient,
+                    upstream,
+                )?,
+            };
             let mut grad: Vec<f64> = vjp.d_disparity.data.iter().map(|v| v.f64()).collect();
             if use_smooth {
                 let (val, gs) = loss::edge_aware_smoothness_grad(&disp_img, &guide)?;

@@ -7,6 +7,7 @@
 //! work; [`temps`] removes temporaries on signals and sweeps those of killed runs.
 
 mod depth;
+mod encode;
 mod files;
 mod npy;
 mod npz;

@@ -1,6 +1,7 @@
 //! Raster images through the `image` crate: PNG (8/16-bit), JPEG, TIFF, EXR.
 //! Colour read from PNG/JPEG/TIFF is display-encoded; EXR holds linear light.
 
+use super::encode::{quantize_u16, quantize_u8};
 use super::files::{extension, open};
 use super::npy::{self, Integers};
 use super::npz::Npz;
@@ -311,7 +312,7 @@ pub fn write_output<T: Real>(
     path: &Path,
     image: &Image<T>,
     bit_depth: BitDepth,
-    to_linear: impl Fn(f64) -> f64,
+    to_linear: impl Fn(f64) -> f64 + Sync,
 ) -> Result<()> {
     let mut s = Staging::new();
     s.output(path, image, bit_depth, to_linear)?;
@@ -333,7 +334,7 @@ impl Staging {
         path: &Path,
         image: &Image<T>,
         bit_depth: BitDepth,
-        to_linear: impl Fn(f64) -> f64,
+        to_linear: impl Fn(f64) -> f64 + Sync,
     ) -> Result<()> {
         let format = OutputFormat::from_path(path)?;
         let (w, h) = (image.width as u32, image.height as u32);
@@ -361,25 +362,11 @@ impl Staging {
                     }
                 })
             }
-            OutputFormat::Exr => {
-                let data: Vec<f32> = image
-                    .data
-                    .iter()
-                    .map(|v| to_linear(v.f64()) as f32)
-                    .collect();
-                let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
-                self.file(path, |out| {
-                    DynamicImage::ImageRgb32F(buf)
-                        .write_to(out, ImageFormat::OpenExr)
-                        .map_err(fail)
-                })
-            }
+            OutputFormat::Exr => self.file(path, |out| {
+                super::encode::exr_rows(path, out, image, to_linear)
+            }),
             OutputFormat::Jpeg => {
-                let data = image
-                    .data
-                    .iter()
-                    .map(|&v| (v.f64().clamp(0.0, 1.0) * 255.0).round() as u8)
-                    .collect();
+                let data = image.data.iter().map(|&v| quantize_u8(v.f64())).collect();
                 let buf = image::RgbImage::from_raw(w, h, data).unwrap();
                 self.file(path, |out| {
                     image::codecs::jpeg::JpegEncoder::new_with_quality(out, 92)
@@ -387,23 +374,16 @@ impl Staging {
                         .map_err(fail)
                 })
             }
-            OutputFormat::Png | OutputFormat::Tiff => {
-                let fmt = if format == OutputFormat::Png {
-                    ImageFormat::Png
-                } else {
-                    ImageFormat::Tiff
-                };
-                let clip = |v: T| v.f64().clamp(0.0, 1.0);
+            OutputFormat::Png => self.file(path, |out| {
+                super::encode::png_rows(path, out, image, bit_depth == BitDepth::Sixteen)
+            }),
+            OutputFormat::Tiff => {
                 let dynimg = match bit_depth {
                     BitDepth::Eight => DynamicImage::ImageRgb8(
                         image::RgbImage::from_raw(
                             w,
                             h,
-                            image
-                                .data
-                                .iter()
-                                .map(|&v| (clip(v) * 255.0).round() as u8)
-                                .collect(),
+                            image.data.iter().map(|&v| quantize_u8(v.f64())).collect(),
                         )
                         .unwrap(),
                     ),
@@ -411,39 +391,22 @@ impl Staging {
                         image::ImageBuffer::from_raw(
                             w,
                             h,
-                            image
-                                .data
-                                .iter()
-                                .map(|&v| (clip(v) * 65535.0).round() as u16)
-                                .collect(),
+                            image.data.iter().map(|&v| quantize_u16(v.f64())).collect(),
                         )
                         .unwrap(),
                     ),
                 };
-                self.file(path, |out| dynimg.write_to(out, fmt).map_err(fail))
+                self.file(path, |out| {
+                    dynimg.write_to(out, ImageFormat::Tiff).map_err(fail)
+                })
             }
         }
     }
 
     /// Stages a one-channel map (see [`write_grey`]); visible at [`Staging::commit`].
     pub fn grey<T: Real>(&mut self, path: &Path, image: &Image<T>) -> Result<()> {
-        let (w, h) = (image.width as u32, image.height as u32);
-        let fail = |e: image::ImageError| Error::file(path, format!("write failed: {e}"));
         match extension(path).as_str() {
-            "png" => {
-                let data = image
-                    .data
-                    .iter()
-                    .map(|v| (v.f64().clamp(0.0, 1.0) * 65535.0).round() as u16)
-                    .collect();
-                let buf =
-                    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, data).unwrap();
-                self.file(path, |out| {
-                    DynamicImage::ImageLuma16(buf)
-                        .write_to(out, ImageFormat::Png)
-                        .map_err(fail)
-                })
-            }
+            "png" => self.file(path, |out| super::encode::png_rows(path, out, image, true)),
             "npy" => {
                 use ndarray_npy::WriteNpyExt;
                 let data: Vec<f32> = image.data.iter().map(|v| v.f64() as f32).collect();
@@ -454,19 +417,7 @@ impl Staging {
                         .map_err(|e| Error::file(path, format!("write failed: {e}")))
                 })
             }
-            "exr" => {
-                let data: Vec<f32> = image
-                    .data
-                    .iter()
-                    .flat_map(|v| [v.f64() as f32; 3])
-                    .collect();
-                let buf = image::Rgb32FImage::from_raw(w, h, data).unwrap();
-                self.file(path, |out| {
-                    DynamicImage::ImageRgb32F(buf)
-                        .write_to(out, ImageFormat::OpenExr)
-                        .map_err(fail)
-                })
-            }
+            "exr" => self.file(path, |out| super::encode::exr_rows(path, out, image, |v| v)),
             e => Err(Error::file(
                 path,
                 format!("unsupported extension '.{e}' for a map (use .png, .npy or .exr)"),

@@ -156,7 +156,10 @@ pub fn source_linear_with_derivatives<T: Real>(
     highlight: bool,
     tone: &Tone,
 ) -> (T, T, T) {
-    let (boosted, d_boost_di, d_boost_dd) = if highlight {
+    // Below the threshold (`10 (I - 200/255) <= 0`) the boost is exactly 1 with zero
+    // derivatives (`q = 0` and `dq = 0`), so the two tanh are skipped.
+    let boost = highlight && encoded > T::c(200.0 / 255.0);
+    let (boosted, d_boost_di, d_boost_dd) = if boost {
         let arg_p = T::c(200.0) * (rel_disp * rel_disp - T::c(0.01));
         let arg_q = T::c(10.0) * (encoded - T::c(200.0 / 255.0));
         let (tp, tq) = (arg_p.tanh(), arg_q.tanh());

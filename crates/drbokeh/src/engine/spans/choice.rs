@@ -20,8 +20,13 @@ use crate::model;
 use crate::presets::RenderSettings;
 use crate::Real;
 
-/// The cost of one disc row on the span path, in taps of the fast engine.
-pub const SPAN_ROW_COST: f64 = 12.0;
+/// The cost of one disc row on the span path, in taps of the fast engine. Measured with
+/// `drbokeh bench --quick` (radius sweep, spans and fast rows of one run, preset physical,
+/// 256 x 256, uniform radius): r 5 px, fast 19.3 ns per tap, spans 95 ns per disc row
+/// (4.9 taps); r 10 px, 14.1 ns per tap, 82 ns per disc row (5.8 taps). The earlier 12
+/// made `auto` take the taps on band-layers where the spans were faster (`auto` 1.26-1.4x
+/// slower than `spans` on the mixed workloads of the same run).
+pub const SPAN_ROW_COST: f64 = 5.5;
 
 /// The cost of scanning one candidate source of a sub-band, in taps.
 pub const SCAN_COST: f64 = 0.5;

@@ -13,6 +13,7 @@ use crate::engine::fast::forward::AlphaSat;
 use crate::engine::planes::Planes;
 use crate::model::{self, CoverageRadius, ScatterStep};
 use crate::Real;
+use std::cell::RefCell;
 
 /// How a band-layer's coverage is computed.
 pub(super) enum CoverageCtx<'a, T> {
@@ -58,6 +59,28 @@ pub(super) struct DiscGather<'a, T> {
     alpha_ext: Vec<T>,
     /// Per padded row, the prefix sums of alpha (f64, `stride + 1` each).
     prefix: Vec<f64>,
+    /// The last gathered disc's rows, ring steps and weight, reused by the next receiver
+    /// of the same coverage radius (the band's receivers are gathered by one thread).
+    profile: RefCell<GatherProfile<T>>,
+}
+
+/// Columns `lo ..= hi` relative to the receiver.
+type Run = (isize, isize);
+
+/// One coverage disc of radius `r_c` as the gather walks it: per row its offset, interior
+/// and ring chunks; the chunks' steps; and the weight `sum S` (which does not depend on
+/// alpha). A function of `r_c` (and the band's fixed shape, rings and window) only, so
+/// receivers of equal `r_c` share it exactly: the same values, summed in the same order.
+struct GatherProfile<T> {
+    r_c: Option<T>,
+    /// `(dy, interior, first chunk, end chunk)` per row with taps.
+    rows: Vec<(isize, Option<Run>, usize, usize)>,
+    /// Column offset of each ring chunk.
+    chunk_dx: Vec<isize>,
+    /// Steps of each ring chunk.
+    steps: Vec<[T; LANES]>,
+    /// `sum S` over the disc (interior counted as 1 per tap).
+    weight: f64,
 }
 
 impl<'a, T: Real> DiscGather<'a, T> {
@@ -113,6 +136,13 @@ impl<'a, T: Real> DiscGather<'a, T> {
             partial,
             alpha_ext,
             prefix,
+            profile: RefCell::new(GatherProfile {
+                r_c: None,
+                rows: Vec::new(),
+                chunk_dx: Vec::new(),
+                steps: Vec::new(),
+                weight: 0.0,
+            }),
         }
     }
 
@@ -155,10 +185,53 @@ impl<'a, T: Real> DiscGather<'a, T> {
         reach: usize,
         work: &mut u64,
     ) -> T {
-        let (stride, s1, ext) = (self.b.stride, self.b.stride + 1, self.b.stride + 2 * MARGIN);
-        let (mut alpha_sum, mut weight) = (0.0f64, 0.0f64);
-        let (mut lane_a, mut lane_w) = ([T::zero(); LANES], [T::zero(); LANES]);
+        let mut profile = self.profile.borrow_mut();
+        if profile.r_c != Some(r_c) {
+            self.build_profile::<SHARP>(&mut profile, r_c, reach);
+        }
+        let (s1, ext) = (self.b.stride + 1, self.b.stride + 2 * MARGIN);
+        let mut alpha_sum = 0.0f64;
+        let mut lane_a = [T::zero(); LANES];
+        let centre = px as isize;
+        for &(dy, interior, c0, c1) in &profile.rows {
+            let row = (py as isize + dy) as usize;
+            if let Some((lo, hi)) = interior {
+                let p = &self.prefix[row * s1..(row + 1) * s1];
+                alpha_sum += p[(centre + hi + 1) as usize] - p[(centre + lo) as usize];
+                *work += 1;
+            }
+            let alpha = &self.alpha_ext[row * ext..(row + 1) * ext];
+            for (&dx0, s) in profile.chunk_dx[c0..c1].iter().zip(&profile.steps[c0..c1]) {
+                let start = (centre + dx0 + MARGIN as isize) as usize;
+                let a: &[T; LANES] = alpha[start..start + LANES].try_into().expect("LANES");
+                for l in 0..LANES {
+                    lane_a[l] = lane_a[l] + s[l] * a[l];
+                }
+                *work += LANES as u64;
+            }
+        }
+        for a in lane_a {
+            alpha_sum += a.f64();
+        }
+        T::c(alpha_sum / profile.weight)
+    }
+
+    /// Walks the disc of radius `r_c` (rows `-reach ..= reach`) into `profile`: its rows,
+    /// ring chunks (inner end outwards, as the spans' runs), their steps and `sum S`.
+    fn build_profile<const SHARP: bool>(
+        &self,
+        profile: &mut GatherProfile<T>,
+        r_c: T,
+        reach: usize,
+    ) {
+        profile.r_c = Some(r_c);
+        profile.rows.clear();
+        profile.chunk_dx.clear();
+        profile.steps.clear();
+        let mut weight = 0.0f64;
+        let mut lane_w = [T::zero(); LANES];
         let reach = reach as isize;
+        let lanes = LANES as isize;
         for dy in -reach..=reach {
             let Some(hw) = self.table.window_half_width(dy) else {
                 continue;
@@ -166,26 +239,18 @@ impl<'a, T: Real> DiscGather<'a, T> {
             let Some(disc) = disc_row(self.shape, self.rings, r_c.f64(), dy, hw, 1.0) else {
                 continue;
             };
-            let row = (py as isize + dy) as usize;
-            let centre = px as isize;
             if let Some((lo, hi)) = disc.interior {
-                let p = &self.prefix[row * s1..(row + 1) * s1];
-                alpha_sum += p[(centre + hi + 1) as usize] - p[(centre + lo) as usize];
                 weight += (hi - lo + 1) as f64;
-                *work += 1;
             }
-            let alpha = &self.alpha_ext[row * ext..(row + 1) * ext];
+            let c0 = profile.chunk_dx.len();
             let mut chunk = |dx0: isize| {
                 let s = ring_steps::<T, SHARP>(self.table, r_c, dy, dx0);
-                let start = (centre + dx0 + MARGIN as isize) as usize;
-                let a: &[T; LANES] = alpha[start..start + LANES].try_into().expect("LANES");
                 for l in 0..LANES {
-                    lane_a[l] = lane_a[l] + s[l] * a[l];
                     lane_w[l] = lane_w[l] + s[l];
                 }
-                *work += LANES as u64;
+                profile.chunk_dx.push(dx0);
+                profile.steps.push(s);
             };
-            let lanes = LANES as isize;
             match (disc.interior, disc.left, disc.right) {
                 (None, Some((lo, hi)), _) => {
                     let mut c = lo;
@@ -212,12 +277,12 @@ impl<'a, T: Real> DiscGather<'a, T> {
                 }
                 (None, None, _) => {}
             }
-            debug_assert!(stride > 0);
+            let c1 = profile.chunk_dx.len();
+            profile.rows.push((dy, disc.interior, c0, c1));
         }
-        for l in 0..LANES {
-            alpha_sum += lane_a[l].f64();
-            weight += lane_w[l].f64();
+        for w in lane_w {
+            weight += w.f64();
         }
-        T::c(alpha_sum / weight)
+        profile.weight = weight;
     }
 }

@@ -16,6 +16,12 @@
 //! [`SUB_ROWS`](scatter::SUB_ROWS) rows, every source reaching it in a fixed order, so
 //! the output is the same bytes for any thread count.
 //!
+//! **Shared profiles.** A disc row's intervals and ring steps depend only on the radius,
+//! the row offset and the window, so consecutive sources of equal radius share one
+//! evaluated profile, and coverage receivers of equal coverage
+//! radius share one gathered disc: exact (the same values summed in the same order), and
+//! the common case in layers of constant or row-constant disparity.
+//!
 //! **Approximations and their bounds** (all relative; each tested at its worst case in
 //! `tests/spans.rs`):
 //! 1. Interior `S := 1` where `1 - S <= 1e-5` ([`geometry::Rings::of`]): `C`, `W` and the

@@ -448,13 +448,26 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     let mut next = 0usize;
     // The previous source's half-widths guess the next one's.
     let mut guess = (0, 0);
+    // The last source whose profile was evaluated: its radius and entry. A source with the
+    // same radius has the same row intervals and profile (they depend on `r`, `ady` and
+    // the window only), so it shares that profile: exact, and the common case in layers
+    // of constant (or row-constant) disparity.
+    let mut last: Option<(T, usize)> = None;
     for (i, src) in sources.iter().enumerate() {
         if src.reach < ady {
             continue;
         }
+        if let Some((r, e)) = last {
+            if src.r == r {
+                let (_, disc, base) = profiles.entries[e];
+                profiles.entries.push((i, disc, base));
+                continue;
+            }
+        }
         let Some(disc) = circle_row(src, ady, hw, &mut guess) else {
             continue;
         };
+        last = Some((src.r, profiles.entries.len()));
         let k0 = disc.interior.map_or(0, |(_, hi)| hi + 1);
         let outer_hi = match (disc.interior, disc.left, disc.right) {
             (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
@@ -533,8 +546,10 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
                     let dx0 = start - src.xs;
                     let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
                         // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
+                        // One vector load, then reversed in registers (indexing the slice
+                        // backwards compiles to eight scalar loads).
                         let at = (base - (dx0 + lanes - 1)) as usize;
-                        let half: &[T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                        let half: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
                         std::array::from_fn(|l| half[LANES - 1 - l])
                     } else {
                         let at = (base + dx0) as usize;

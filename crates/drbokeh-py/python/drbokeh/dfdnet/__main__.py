@@ -1,0 +1,162 @@
+"""``python -m drbokeh.dfdnet train|eval|reproduce ... --out DIR``: depth networks trained
+through rendering layers, without depth labels (issue 17; supplement figs. 9-10).
+
+  train      train runs (default: the whole table) into DIR; ``--quick`` makes tiny data in
+             DIR/data itself, trains drbokeh ``physical`` for a few steps and writes
+             DIR/results.json (loss first/last, test MAE trained vs untrained)
+  eval       the test table (results.md/.json), index.html with test images, plots/*.svg
+  reproduce  train the whole table, then eval (the one command behind the table)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+
+from .data import SplitSpec, default_splits, prepare, subset
+from .evaluate import evaluate, metrics
+from .train import HIGHLIGHTS, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
+
+
+_log = log_line
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-o", "--output", "--out", dest="out", required=True, type=Path, help="output directory")
+    p.add_argument("--data", type=Path, help="data cache directory (default OUT/data); scenes are made there if missing")
+    p.add_argument("--drbokeh", help="the drbokeh command line (default $DRBOKEH_CLI, PATH, or this checkout's target/release)")
+    p.add_argument("--size", type=int, default=128, help="scene size, px (default 128)")
+    p.add_argument("--spp", type=int, default=144, help="samples per pixel of the traced images (default 144)")
+    p.add_argument("--train-scenes", type=int, default=160)
+    p.add_argument("--val-scenes", type=int, default=16)
+    p.add_argument("--test-scenes", type=int, default=32)
+    p.add_argument("--threads", type=int, default=1, help="torch and renderer threads (default 1: on a shared machine two processes of one thread beat one of two)")
+    p.add_argument("--steps", type=int, default=TrainConfig.steps, help=f"training steps per run (default {TrainConfig.steps})")
+    p.add_argument("--batch", type=int, default=TrainConfig.batch)
+    p.add_argument("--crop", type=int, default=TrainConfig.crop, help="training crop side, a multiple of 16")
+    p.add_argument("--base", type=int, default=TrainConfig.base, help=f"U-Net width (default {TrainConfig.base}: about 1.1 M parameters)")
+    p.add_argument("--lr", type=float, default=TrainConfig.lr)
+    p.add_argument("--highlights", choices=HIGHLIGHTS, default=TrainConfig.highlights,
+                   help=f"clipped highlights in the loss (default {TrainConfig.highlights}; docs/dfdnet.md)")
+    p.add_argument("--init-disparity", type=float, default=TrainConfig.init_disparity,
+                   help="initial disparity output (the head's bias; default: PyTorch's initialisation, about 0.5)")
+    p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
+    p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised); default: the table: "
+                   + ",".join(r.name for r in TABLE_RUNS))
+
+
+def _specs(a: argparse.Namespace) -> List[SplitSpec]:
+    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes)
+
+
+def _cfg(a: argparse.Namespace) -> TrainConfig:
+    if a.crop % 16 or a.crop > a.size:
+        raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
+    return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, threads=a.threads,
+                       highlights=a.highlights, init_disparity=a.init_disparity)
+
+
+def _runs(a: argparse.Namespace) -> List[RunSpec]:
+    if not a.runs:
+        return list(TABLE_RUNS)
+    try:
+        return [parse_run(r.strip()) for r in a.runs.split(",") if r.strip()]
+    except ValueError as e:
+        raise SystemExit(f"--runs: {e}")
+
+
+def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
+    a.out.mkdir(parents=True, exist_ok=True)
+    splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+    (a.out / "config.json").write_text(json.dumps({"train": asdict(cfg), "splits": [s.__dict__ for s in _specs(a)]}, indent=1))
+    todo = []
+    for spec in runs:
+        if existing(a.out, spec) is not None and not a.retrain:
+            _log(f"{spec.name}: already trained in {a.out / spec.name} (--retrain to redo)")
+        else:
+            todo.append(spec)
+    if a.jobs <= 1 or len(todo) <= 1:
+        for spec in todo:
+            train_logged(spec, splits, cfg, a.out)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(a.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        for f in [pool.submit(train_logged, spec, splits, cfg, a.out) for spec in todo]:
+            f.result()
+
+
+def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
+    splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+    res = evaluate(a.out, splits, runs, cfg, note=a.note or "")
+    _log(f"wrote {a.out / 'results.md'}, {a.out / 'index.html'}")
+    print((a.out / "results.md").read_text())
+    del res
+
+
+def _quick(a: argparse.Namespace) -> None:
+    """Tiny data (96 px, the scenes of largest blur: K >= 3 px), a few steps of drbokeh
+    ``physical``."""
+    specs = [SplitSpec("train", 1711, 8, 96, 64), SplitSpec("val", 1712, 3, 96, 64), SplitSpec("test", 1713, 8, 96, 64)]
+    cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=2, crop=64, base=8,
+                      lr=2e-3, eval_every=10, threads=a.threads, highlights=a.highlights,
+                      init_disparity=a.init_disparity)
+    a.out.mkdir(parents=True, exist_ok=True)
+    splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
+    splits = {k: subset(v, v.blur >= 3.0) for k, v in splits.items()}
+    spec = RunSpec("physical", "hssim")
+    r = train_run(spec, splits, cfg, a.out, _log)
+    losses = [c["loss"] for c in r["curve"]]  # type: ignore[union-attr]
+    n = max(1, len(losses) // 5)
+    from .train import load_model
+
+    test = splits["test"]
+    trained = metrics(predict(load_model(a.out / spec.name, cfg), test.aif), test)
+    untrained = metrics(predict(new_model(cfg), test.aif), test)
+    out = {
+        "run": spec.name, "steps": cfg.steps,
+        "loss_first": float(np.mean(losses[:n])), "loss_last": float(np.mean(losses[-n:])),
+        "test_mae_trained": trained["mae"], "test_mae_untrained": untrained["mae"],
+        "seconds_per_step": r["seconds_per_step"],
+    }
+    (a.out / "results.json").write_text(json.dumps(out, indent=1))
+    _log(json.dumps(out))
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m drbokeh.dfdnet", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("train", help="train runs")
+    _common(t)
+    t.add_argument("--quick", action="store_true", help="tiny self-made data, few steps, DIR/results.json")
+    t.add_argument("--retrain", action="store_true", help="train runs again even if DIR has them")
+    e = sub.add_parser("eval", help="test table, HTML page, plots")
+    _common(e)
+    e.add_argument("--note", help="a line put above the table (e.g. what is reduced)")
+    r = sub.add_parser("reproduce", help="train the whole table, then eval")
+    _common(r)
+    r.add_argument("--retrain", action="store_true")
+    r.add_argument("--note")
+    a = ap.parse_args(argv)
+    if a.cmd == "train" and a.quick:
+        _quick(a)
+        return 0
+    runs, cfg = _runs(a), _cfg(a)
+    if a.cmd in ("train", "reproduce"):
+        _train(a, runs, cfg)
+    if a.cmd in ("eval", "reproduce"):
+        _eval(a, runs, cfg)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

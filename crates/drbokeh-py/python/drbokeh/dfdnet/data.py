@@ -1,0 +1,196 @@
+"""The training data: ray-traced ``drbokeh benchmark make`` scenes, cached as arrays.
+
+Each split is one benchmark seed (train / validation / test never share a scene). Only the
+scenes that focus on the nearest billboard are made (``--shard 0/3``: scene ``i`` focuses
+at disparity 1 when ``i % 3 == 0``, docs/dfd.md), so ``d = disparity - 1 <= 0`` everywhere
+and the sign of ``d`` is determined; a scene whose recorded focus is not 1 is rejected.
+The scenes' largest blur runs log-spaced over the scene index (2-20 px at 256 px, so
+1-10 px at 128 px), so every split covers the whole range of K.
+
+The network and the loss see ``aif`` (the all-in-focus PNG, display-encoded, clipped) and
+``bokeh`` (the traced defocused PNG) and the scene's ``focus`` and ``blur`` (K); the true
+``disparity`` and the metric depth range are kept for evaluation only.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SplitSpec:
+    """One split: ``drbokeh benchmark make --scenes 3*count --shard 0/3 --seed seed``."""
+
+    name: str
+    seed: int
+    count: int
+    size: int
+    spp: int
+
+
+@dataclass
+class Split:
+    """A split's arrays: ``aif``, ``bokeh`` ``(N, 3, H, W)`` float32 display-encoded,
+    ``disparity`` ``(N, 1, H, W)``, ``focus``, ``blur``, ``near_mm``, ``far_mm`` ``(N,)``,
+    ``names``."""
+
+    aif: np.ndarray
+    bokeh: np.ndarray
+    disparity: np.ndarray
+    focus: np.ndarray
+    blur: np.ndarray
+    near_mm: np.ndarray
+    far_mm: np.ndarray
+    names: List[str]
+
+    def __len__(self) -> int:
+        return int(self.aif.shape[0])
+
+
+def default_splits(size: int = 128, spp: int = 144, train: int = 160, val: int = 16, test: int = 32) -> List[SplitSpec]:
+    return [
+        SplitSpec("train", 1701, train, size, spp),
+        SplitSpec("val", 1702, val, size, spp),
+        SplitSpec("test", 1703, test, size, spp),
+    ]
+
+
+def find_cli(explicit: Optional[str] = None) -> str:
+    """The ``drbokeh`` binary: ``explicit``, ``$DRBOKEH_CLI``, ``drbokeh`` on the PATH, or
+    this checkout's ``target/release/drbokeh``."""
+    for c in (explicit, os.environ.get("DRBOKEH_CLI"), shutil.which("drbokeh")):
+        if c:
+            return c
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        cand = parent / "target" / "release" / "drbokeh"
+        if cand.is_file():
+            return str(cand)
+    raise FileNotFoundError(
+        "cannot find the drbokeh command line (set DRBOKEH_CLI or pass --drbokeh); "
+        "build it with cargo build --release -p drbokeh-cli"
+    )
+
+
+def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1) -> None:
+    """Runs ``drbokeh benchmark make`` (resumable: scenes already there are kept)."""
+    cmd = [
+        cli, "benchmark", "make", "--scenes", str(3 * spec.count), "--shard", "0/3",
+        "--seed", str(spec.seed), "--size", str(spec.size), "--spp", str(spec.spp),
+        "--threads", str(threads), "--out", str(directory), "-q",
+    ]
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr.strip()}")
+
+
+def load_benchmark_dir(directory: Path) -> Split:
+    import drbokeh
+
+    aif, bokeh, disp, focus, blur, near, far, names = [], [], [], [], [], [], [], []
+    for scene in drbokeh.load_benchmark(directory):
+        record = json.loads((Path(scene["path"]) / "scene.json").read_text())["derived"]
+        f = float(scene["camera"]["focus"])
+        if abs(f - 1.0) > 1e-6:
+            raise ValueError(f"{scene['path']}: focus {f}, expected 1 (near focus only)")
+        aif.append(np.clip(scene["aif"], 0.0, 1.0).transpose(2, 0, 1))
+        bokeh.append(np.clip(scene["ground_truth"], 0.0, 1.0).transpose(2, 0, 1))
+        disp.append(scene["disparity"][None])
+        focus.append(1.0)
+        blur.append(float(scene["camera"]["blur"]))
+        near.append(float(record["disparity_near_depth_mm"]))
+        far.append(float(record["disparity_far_depth_mm"]))
+        names.append(str(scene["name"]))
+    f32 = np.float32
+    return Split(
+        np.stack(aif).astype(f32), np.stack(bokeh).astype(f32), np.stack(disp).astype(f32),
+        np.array(focus, f32), np.array(blur, f32), np.array(near, np.float64),
+        np.array(far, np.float64), names,
+    )
+
+
+def _save(split: Split, path: Path) -> None:
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(
+        tmp, aif=split.aif, bokeh=split.bokeh, disparity=split.disparity, focus=split.focus,
+        blur=split.blur, near_mm=split.near_mm, far_mm=split.far_mm, names=np.array(split.names),
+    )
+    tmp.replace(path)
+
+
+def _load(path: Path) -> Split:
+    z = np.load(path)
+    return Split(
+        z["aif"], z["bokeh"], z["disparity"], z["focus"], z["blur"], z["near_mm"], z["far_mm"],
+        [str(n) for n in z["names"]],
+    )
+
+
+def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = None, threads: int = 1, log=print) -> Dict[str, Split]:
+    """Makes (if missing) and loads every split, cached as ``data_dir/<name>.npz``; the
+    ray-traced scenes stay in ``data_dir/<name>/``. ``data_dir/splits.json`` records the
+    specs; a cache made with other specs is an error (delete it or use another
+    directory)."""
+    data_dir.mkdir(parents=True, exist_ok=True)
+    record = data_dir / "splits.json"
+    want = [s.__dict__ for s in specs]
+    if record.exists() and json.loads(record.read_text()) != want:
+        raise ValueError(f"{record} was made with other splits; use another --data directory")
+    record.write_text(json.dumps(want, indent=1))
+    out: Dict[str, Split] = {}
+    for spec in specs:
+        cache = data_dir / f"{spec.name}.npz"
+        if not cache.exists():
+            import time
+
+            t0 = time.perf_counter()
+            make_benchmark(spec, data_dir / spec.name, find_cli(cli), threads)
+            split = load_benchmark_dir(data_dir / spec.name)
+            _save(split, cache)
+            log(f"data: {spec.name}: {len(split)} scenes at {spec.size} px in {time.perf_counter() - t0:.0f} s")
+        out[spec.name] = _load(cache)
+    return out
+
+
+def subset(split: Split, keep: np.ndarray) -> Split:
+    """The scenes where ``keep`` (a boolean ``(N,)`` array) is true."""
+    idx = np.flatnonzero(keep)
+    return Split(
+        split.aif[idx], split.bokeh[idx], split.disparity[idx], split.focus[idx], split.blur[idx],
+        split.near_mm[idx], split.far_mm[idx], [split.names[i] for i in idx],
+    )
+
+
+def random_crops(
+    split: Split, indices: np.ndarray, crop: int, rng: np.random.Generator,
+    extra: Optional[Dict[str, np.ndarray]] = None,
+) -> Dict[str, np.ndarray]:
+    """A batch of random ``crop x crop`` windows with random horizontal and vertical flips
+    (the same for image, target and disparity, and for the ``(N, C, H, W)`` arrays in
+    ``extra``, returned under their keys). The random draws do not depend on ``extra``."""
+    h, w = split.aif.shape[-2:]
+    arrays = {"aif": split.aif, "bokeh": split.bokeh, "disparity": split.disparity, **(extra or {})}
+    out: Dict[str, List[np.ndarray]] = {k: [] for k in arrays}
+    for i in indices:
+        y = int(rng.integers(0, h - crop + 1))
+        x = int(rng.integers(0, w - crop + 1))
+        fy, fx = bool(rng.integers(0, 2)), bool(rng.integers(0, 2))
+        for key in out:
+            a = arrays[key][i, :, y : y + crop, x : x + crop]
+            if fy:
+                a = a[:, ::-1]
+            if fx:
+                a = a[:, :, ::-1]
+            out[key].append(np.ascontiguousarray(a))
+    batch = {k: np.stack(v) for k, v in out.items()}
+    batch["focus"] = split.focus[indices]
+    batch["blur"] = split.blur[indices]
+    return batch

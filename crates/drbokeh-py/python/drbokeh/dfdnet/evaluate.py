@@ -1,0 +1,172 @@
+"""Evaluation: the test table (markdown + JSON), the HTML page of test images, loss plots.
+
+Metrics on the full test images (128 px by default), every pixel of every scene:
+MAE and RMSE of the normalised disparity; ``delta < 1.25``, the fraction of pixels whose
+metric depth ratio ``max(z / z*, z* / z)`` is below 1.25, with depth from disparity through
+the scene's range (``1/z = d (1/z_near - 1/z_far) + 1/z_far``; disparity 0 is the finite
+far depth). ``MAE K>=3`` is the MAE over the scenes whose largest blur is at least 3 px
+(6 px at 256 px, the group docs/dfd.md targets). Reference rows: the untrained network
+(the same initial weights every run starts from) and the oracle constant (the median of
+each scene's *true* disparity).
+"""
+
+from __future__ import annotations
+
+import json
+from html import escape
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .data import Split
+from .report import smooth, svg_lines, upscale, write_png
+from .train import RunSpec, TrainConfig, load_model, new_model, predict
+
+
+def depth_mm(disparity: np.ndarray, near_mm: np.ndarray, far_mm: np.ndarray) -> np.ndarray:
+    shape = (-1,) + (1,) * (disparity.ndim - 1)
+    inv_near, inv_far = (1.0 / near_mm).reshape(shape), (1.0 / far_mm).reshape(shape)
+    return 1.0 / (disparity.astype(np.float64) * (inv_near - inv_far) + inv_far)
+
+
+def metrics(pred: np.ndarray, split: Split, k_min: float = 3.0) -> Dict[str, float]:
+    truth = split.disparity
+    err = pred.astype(np.float64) - truth
+    zp, zt = depth_mm(pred, split.near_mm, split.far_mm), depth_mm(truth, split.near_mm, split.far_mm)
+    ratio = np.maximum(zp / zt, zt / zp)
+    big = split.blur >= k_min
+    return {
+        "mae": float(np.abs(err).mean()),
+        "rmse": float(np.sqrt((err ** 2).mean())),
+        "delta125": float((ratio < 1.25).mean()),
+        "mae_k3": float(np.abs(err[big]).mean()) if big.any() else float("nan"),
+    }
+
+
+def constant_guess(split: Split) -> np.ndarray:
+    med = np.median(split.disparity.reshape(len(split), -1), axis=1)
+    return np.broadcast_to(med[:, None, None, None], split.disparity.shape).astype(np.float32)
+
+
+def _fmt(v: float, digits: int = 4) -> str:
+    return "-" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
+
+
+def evaluate(
+    out_dir: Path,
+    splits: Dict[str, Split],
+    runs: Sequence[RunSpec],
+    cfg: TrainConfig,
+    html_scenes: int = 8,
+    note: str = "",
+) -> Dict[str, object]:
+    """Writes ``results.md``, ``results.json``, ``index.html`` (+ ``html/*.png``) and
+    ``plots/*.svg`` into ``out_dir``; returns the results."""
+    test = splits["test"]
+    rows: List[Dict[str, object]] = []
+    preds: Dict[str, np.ndarray] = {}
+    for spec in runs:
+        run_dir = out_dir / spec.name
+        if not (run_dir / "model.pt").exists():
+            continue
+        log = json.loads((run_dir / "log.json").read_text())
+        p = predict(load_model(run_dir, spec.config(cfg)), test.aif)
+        preds[spec.name] = p
+        rows.append({
+            "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),
+            "seconds_per_step": log["seconds_per_step"], "seconds_per_epoch": log["seconds_per_epoch"],
+            "epochs": log["epochs"], "steps": log["config"]["steps"],
+        })
+    untrained = predict(new_model(cfg), test.aif)
+    preds["untrained"] = untrained
+    rows.append({"run": "untrained network", "layer": "-", "loss": "-", **metrics(untrained, test)})
+    rows.append({"run": "constant (true median, oracle)", "layer": "-", "loss": "-", **metrics(constant_guess(test), test)})
+
+    lines = [
+        "# drbokeh.dfdnet: test table",
+        "",
+        note,
+        "",
+        f"Test: {len(test)} scenes ({test.aif.shape[-1]} px, near focus), "
+        f"{int((test.blur >= 3).sum())} with largest blur >= 3 px.",
+        "",
+        "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | s/step | s/epoch |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['run']} | {r['layer']} | {r['loss']} | {_fmt(r['mae'])} | {_fmt(r['rmse'])} | "
+            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r.get('seconds_per_step', float('nan')), 2)} | "
+            f"{_fmt(r.get('seconds_per_epoch', float('nan')), 1)} |"
+        )
+    (out_dir / "results.md").write_text("\n".join(lines) + "\n")
+    results = {"rows": rows, "config": cfg.__dict__, "test_scenes": test.names, "note": note}
+    (out_dir / "results.json").write_text(json.dumps(results, indent=1))
+    _plots(out_dir, [s for s in runs if s.name in preds])
+    _html(out_dir, test, preds, rows, html_scenes)
+    return results
+
+
+def _plots(out_dir: Path, runs: Sequence[RunSpec]) -> None:
+    plots = out_dir / "plots"
+    plots.mkdir(exist_ok=True)
+    val: Dict[str, List] = {}
+    rel: Dict[str, List] = {}
+    for spec in runs:
+        log = json.loads((out_dir / spec.name / "log.json").read_text())
+        losses = [c["loss"] for c in log["curve"]]
+        sm = smooth(losses, 25)
+        steps = [c["step"] + 1 for c in log["curve"]]
+        (plots / f"loss_{spec.name}.svg").write_text(
+            svg_lines({spec.name: list(zip(steps, sm))}, f"training loss, {spec.name} (running mean of 25)", "step", "loss", log_y=True)
+        )
+        rel[spec.name] = [(s, v / sm[0]) for s, v in zip(steps, sm)]
+        val[spec.name] = [(c["step"], c["val_mae"]) for c in log["val_curve"]]
+    if rel:
+        (plots / "loss_relative.svg").write_text(
+            svg_lines(rel, "training loss / its start (running mean of 25)", "step", "relative loss", log_y=True)
+        )
+        (plots / "val_mae.svg").write_text(svg_lines(val, "validation disparity MAE (monitoring only)", "step", "MAE"))
+
+
+def _html(out_dir: Path, test: Split, preds: Dict[str, np.ndarray], rows: List[Dict[str, object]], count: int) -> None:
+    pics = out_dir / "html"
+    pics.mkdir(exist_ok=True)
+    order = np.argsort(test.blur)
+    chosen = order[np.linspace(0, len(order) - 1, min(count, len(order))).round().astype(int)]
+    chosen = list(dict.fromkeys(int(i) for i in chosen))
+    mae = {str(r["run"]): r["mae"] for r in rows}
+    cols = ["aif", "bokeh", "truth"] + list(preds)
+    head = "".join(f"<th>{escape(c)}<br><small>{'' if c not in mae else 'MAE ' + _fmt(float(mae[c]))}</small></th>" for c in cols)
+    body = []
+    for i in chosen:
+        name = test.names[i]
+        cells = []
+        for c in cols:
+            if c == "aif":
+                img, err = test.aif[i].transpose(1, 2, 0), None
+            elif c == "bokeh":
+                img, err = test.bokeh[i].transpose(1, 2, 0), None
+            elif c == "truth":
+                img, err = test.disparity[i, 0], None
+            else:
+                key = "untrained" if c == "untrained" else c
+                img = preds[key][i, 0]
+                err = float(np.abs(img - test.disparity[i, 0]).mean())
+            fname = f"{name}_{c}.png"
+            write_png(pics / fname, upscale(img, 2))
+            cap = "" if err is None else f"<br><small>{err:.3f}</small>"
+            cells.append(f'<td><img src="html/{fname}" width="{2 * img.shape[1]}">{cap}</td>')
+        body.append(f"<tr><td>{escape(name)}<br><small>K {test.blur[i]:.1f} px</small></td>{''.join(cells)}</tr>")
+    table = (out_dir / "results.md").read_text()
+    page = (
+        "<!doctype html><meta charset='utf-8'><title>drbokeh.dfdnet test images</title>"
+        "<style>body{font-family:sans-serif} td,th{padding:2px;text-align:center;vertical-align:top}</style>"
+        "<h1>Depth networks trained through rendering layers: test images</h1>"
+        "<p>Disparity: white = near (1), black = far (0). Numbers under predictions: the scene's MAE.</p>"
+        f"<table><tr><th>scene</th>{head}</tr>{''.join(body)}</table>"
+        f"<h2>Table</h2><pre>{escape(table)}</pre>"
+        "<h2>Curves</h2><img src='plots/loss_relative.svg'><img src='plots/val_mae.svg'>"
+    )
+    (out_dir / "index.html").write_text(page)

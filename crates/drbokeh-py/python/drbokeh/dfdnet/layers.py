@@ -1,0 +1,158 @@
+"""Rendering layers for training: ``disparity -> defocused image``, all differentiable.
+
+Every layer maps ``aif`` ``(B, 3, H, W)`` (display-encoded, gamma transfer), a predicted
+``disparity`` ``(B, 1, H, W)`` in [0, 1], and per-item ``focus``, ``blur`` (K) ``(B,)`` to
+the display-encoded defocused image ``(B, 3, H, W)``.
+
+- ``drbokeh-physical``, ``drbokeh-paper``: one opaque layer through
+  :func:`drbokeh.torch.render` (the Rust renderer and its exact adjoint).
+- ``gausspsf``: GaussPSF (Gur & Wolf 2019) as ``crates/drbokeh/src/baselines/gauss_psf.rs``:
+  each source pixel spreads a Gaussian of ``sigma = sqrt((K d / 2)^2 + 1/4)``, gathered and
+  normalised over in-image sources, ``out(x) = sum_y w I(y) / sum_y w``,
+  ``w = exp(-|x-y|^2 / (2 sigma_y^2)) / sigma_y^2``, in linear light; the gather radius is
+  three standard deviations of the largest Gaussian of the disparity (of the batch).
+- ``aperture``: aperture compositing (Srinivasan et al. 2018) as
+  ``baselines/aperture_compositing.rs``: the image resampled (bilinear, clamped borders) at
+  ``x + K d(x) u_j`` for 128 golden-angle spiral samples ``u_j`` of the unit disc and
+  averaged in linear light.
+
+Here ``d = disparity - focus``. ``tests/test_dfdnet.py`` checks the two PyTorch baselines
+against the Rust ones (``drbokeh eval``'s renders are not exposed to Python, so against a
+direct NumPy transcription of the Rust loops) and their gradients with ``gradcheck``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Dict, List, Tuple
+
+import torch
+import torch.nn.functional as F
+
+GAMMA = 2.2
+APERTURE_SAMPLES = 128
+
+Layer = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
+
+
+def linearize(encoded: torch.Tensor, gamma: float = GAMMA) -> torch.Tensor:
+    return encoded.clamp_min(0.0).pow(gamma)
+
+
+def encode(linear: torch.Tensor, gamma: float = GAMMA) -> torch.Tensor:
+    # The small floor keeps the derivative of x^(1/g) finite at 0 (the Rust layers give 0).
+    return linear.clamp_min(1e-8).pow(1.0 / gamma)
+
+
+class _GaussGather(torch.autograd.Function):
+    """``num[:, c](x) = sum_o w(o, var(x+o)) src[:, c](x+o)`` over offsets ``|o_x|, |o_y| <= r``
+    with ``w(o, v) = exp(-|o|^2 / (2 v)) / v``, on a ``r``-padded ``src`` and ``var``. A
+    loop over offsets in both directions, so memory stays at a few planes (autograd would
+    keep every offset's weights). Gradient with respect to ``var`` only."""
+
+    @staticmethod
+    def forward(ctx, src: torch.Tensor, var_p: torch.Tensor, r: int) -> torch.Tensor:  # type: ignore[override]
+        b, c, hp, wp = src.shape
+        h, w = hp - 2 * r, wp - 2 * r
+        num = torch.zeros(b, c, h, w, dtype=src.dtype)
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                ys, xs = r + dy, r + dx
+                v = var_p[:, :, ys : ys + h, xs : xs + w]
+                num += torch.exp(-float(dx * dx + dy * dy) / (2.0 * v)) / v * src[:, :, ys : ys + h, xs : xs + w]
+        ctx.save_for_backward(src, var_p)
+        ctx.r = r
+        return num
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
+        src, var_p = ctx.saved_tensors
+        r = ctx.r
+        h, w = grad.shape[-2:]
+        g_var = torch.zeros_like(var_p)
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                ys, xs = r + dy, r + dx
+                rr = float(dx * dx + dy * dy)
+                v = var_p[:, :, ys : ys + h, xs : xs + w]
+                wt = torch.exp(-rr / (2.0 * v)) / v
+                dw = wt * (rr / (2.0 * v * v) - 1.0 / v)
+                g_var[:, :, ys : ys + h, xs : xs + w] += dw * (grad * src[:, :, ys : ys + h, xs : xs + w]).sum(1, keepdim=True)
+        return None, g_var, None
+
+
+def gausspsf(aif: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor) -> torch.Tensor:
+    b, _, h, w = aif.shape
+    lin = linearize(aif)
+    k = blur.view(b, 1, 1, 1).to(aif.dtype)
+    half = k * (disparity - focus.view(b, 1, 1, 1).to(aif.dtype)) * 0.5
+    var = half * half + 0.25  # sigma^2 of each source pixel
+    # Gather radius: three standard deviations of the largest Gaussian in the batch.
+    max_sigma = math.sqrt(float(var.detach().max()))
+    r = max(1, math.ceil(3.0 * max_sigma))
+    # Sources outside the image carry no weight: pad with zeros and a validity plane.
+    ones = torch.ones(b, 1, h, w, dtype=aif.dtype)
+    src = F.pad(torch.cat([lin, ones], 1), (r, r, r, r))
+    var_p = F.pad(var, (r, r, r, r), value=1.0)
+    num = _GaussGather.apply(src, var_p, r)
+    return encode(num[:, :3] / num[:, 3:])
+
+
+def aperture_samples(n: int = APERTURE_SAMPLES) -> List[Tuple[float, float]]:
+    """Area-uniform golden-angle spiral on the unit disc (as the Rust baseline)."""
+    golden = math.pi * (3.0 - math.sqrt(5.0))
+    out = []
+    for i in range(n):
+        r = math.sqrt((i + 0.5) / n)
+        t = i * golden
+        out.append((r * math.cos(t), r * math.sin(t)))
+    return out
+
+
+def aperture(aif: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor) -> torch.Tensor:
+    b, _, h, w = aif.shape
+    lin = linearize(aif)
+    uv = torch.tensor(aperture_samples(), dtype=aif.dtype)  # (S, 2)
+    s = uv.shape[0]
+    shift = blur.view(b, 1, 1).to(aif.dtype) * (disparity[:, 0] - focus.view(b, 1, 1).to(aif.dtype))
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=aif.dtype), torch.arange(w, dtype=aif.dtype), indexing="ij")
+    # Sample positions (B, H, W, S), clamped to the image as the Rust bilinear lookup.
+    px = (xs[None, :, :, None] + shift[..., None] * uv[:, 0]).clamp(0, w - 1)
+    py = (ys[None, :, :, None] + shift[..., None] * uv[:, 1]).clamp(0, h - 1)
+    gx = px / (w - 1) * 2 - 1
+    gy = py / (h - 1) * 2 - 1
+    grid = torch.stack([gx, gy], -1).reshape(b, h, w * s, 2)
+    sampled = F.grid_sample(lin, grid, mode="bilinear", padding_mode="border", align_corners=True)
+    out = sampled.view(b, 3, h, w, s).mean(-1)
+    return encode(out)
+
+
+def drbokeh_layer(preset: str, threads: int = 1) -> Layer:
+    from .. import torch as dbt
+
+    def render(aif: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor) -> torch.Tensor:
+        rgb = aif.permute(0, 2, 3, 1).unsqueeze(1).contiguous()  # (B, 1, H, W, 3)
+        disp = disparity.clamp(0.0, 1.0)
+        alpha = torch.ones_like(disp)
+        out = dbt.render(
+            rgb, alpha, disp, focus.to(aif.dtype), blur.to(aif.dtype),
+            preset=preset, gamma=GAMMA, threads=threads,
+        )
+        return out.permute(0, 3, 1, 2)
+
+    return render
+
+
+LAYERS = ("physical", "paper", "gausspsf", "aperture")
+
+
+def make_layer(name: str, threads: int = 1) -> Layer:
+    table: Dict[str, Callable[[], Layer]] = {
+        "physical": lambda: drbokeh_layer("physical", threads),
+        "paper": lambda: drbokeh_layer("paper", threads),
+        "gausspsf": lambda: gausspsf,
+        "aperture": lambda: aperture,
+    }
+    if name not in table:
+        raise ValueError(f"unknown layer {name!r} (available: {', '.join(LAYERS)})")
+    return table[name]()

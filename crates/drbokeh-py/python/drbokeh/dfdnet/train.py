@@ -1,0 +1,260 @@
+"""Training: one U-Net per run, through one rendering layer and one loss (or supervised on
+the true disparity, the upper bound). Everything but the layer and the loss is identical
+across runs: the same initial weights, the same batches, crops and flips (seeded), the same
+optimiser and schedule."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Callable, Dict, List, Optional, Tuple
+
+import numpy as np
+import torch
+
+from .data import Split, random_crops
+from .highlights import energy_source, reach_mask
+from .layers import LAYERS, make_layer
+from .losses import LOSSES, defocus_loss
+from .unet import UNet, parameter_count
+
+
+HIGHLIGHTS = ("none", "reach", "energy", "energy+reach")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """``layer`` is a rendering layer (``layers.LAYERS``) or ``supervised``; ``loss`` one of
+    ``losses.LOSSES`` (ignored when supervised: L1 on the true disparity); ``highlights``
+    overrides ``TrainConfig.highlights`` for this run (the highlight ablation)."""
+
+    layer: str
+    loss: str = "hssim"
+    highlights: Optional[str] = None
+
+    @property
+    def name(self) -> str:
+        if self.layer == "supervised":
+            return "supervised"
+        return f"{self.layer}-{self.loss}" + (f"-{self.highlights}" if self.highlights else "")
+
+    def config(self, cfg: "TrainConfig") -> "TrainConfig":
+        return cfg if self.highlights is None else replace(cfg, highlights=self.highlights)
+
+
+# The table: the four layers with L1+G+HSSIM, the loss ablation through `physical` (the
+# structure terms, and the clipped-highlight treatment), the two baselines with L1+G (the
+# layers compared under the loss where `physical` is best), and the supervised upper bound.
+TABLE_RUNS: List[RunSpec] = [
+    RunSpec("physical", "hssim"),
+    RunSpec("physical", "ssim"),
+    RunSpec("physical", "l1g"),
+    RunSpec("physical", "hssim", "none"),
+    RunSpec("gausspsf", "hssim"),
+    RunSpec("aperture", "hssim"),
+    RunSpec("paper", "hssim"),
+    RunSpec("gausspsf", "l1g"),
+    RunSpec("aperture", "l1g"),
+    RunSpec("supervised"),
+]
+
+
+def parse_run(name: str) -> RunSpec:
+    if name == "supervised":
+        return RunSpec("supervised")
+    parts = name.split("-")
+    layer, loss = parts[0], parts[1] if len(parts) > 1 else ""
+    hl = parts[2] if len(parts) == 3 else None
+    if len(parts) not in (2, 3) or layer not in LAYERS or loss not in LOSSES or (hl is not None and hl not in HIGHLIGHTS):
+        raise ValueError(
+            f"unknown run {name!r}: expected LAYER-LOSS or LAYER-LOSS-HIGHLIGHTS (layers {', '.join(LAYERS)}; "
+            f"losses {', '.join(LOSSES)}; highlights {', '.join(HIGHLIGHTS)}) or supervised"
+        )
+    return RunSpec(layer, loss, hl)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    steps: int = 250
+    batch: int = 4
+    crop: int = 64
+    lr: float = 2e-3
+    base: int = 12
+    seed: int = 17
+    eval_every: int = 25
+    threads: int = 1
+    w_l1: float = 0.5
+    w_smooth: float = 0.5
+    w_structure: float = 10.0
+    edge_sensitivity: float = 10.0
+    # Clipped highlights (highlights.py): "none" (the clipped photo as is, L1 leaves out
+    # pixels clipped in the traced image), "reach" (every image term leaves out the pixels a
+    # clipped all-in-focus pixel can reach), "energy" (the layer renders the photo with the
+    # highlights' missing light restored, the render clipped at white as the camera's),
+    # "energy+reach" (both).
+    highlights: str = "energy"
+    # Initial value of the disparity output (the head's bias; None: PyTorch's default
+    # initialisation, about 0.5).
+    init_disparity: Optional[float] = None
+
+
+def new_model(cfg: TrainConfig) -> UNet:
+    torch.manual_seed(cfg.seed)
+    model = UNet(cfg.base)
+    if cfg.init_disparity is not None:
+        p = min(max(cfg.init_disparity, 1e-3), 1 - 1e-3)
+        with torch.no_grad():
+            model.head.bias.fill_(math.log(p / (1 - p)))
+    return model
+
+
+def highlight_arrays(split: Split, mode: str) -> Dict[str, np.ndarray]:
+    """The per-scene arrays a highlight mode needs: ``reach`` ``(N, 1, H, W)`` (1 = in the
+    loss) and/or ``source`` ``(N, 3, H, W)`` (the layer's input image)."""
+    if mode not in HIGHLIGHTS:
+        raise ValueError(f"unknown highlight mode {mode!r} (available: {', '.join(HIGHLIGHTS)})")
+    out: Dict[str, np.ndarray] = {}
+    if "reach" in mode:
+        out["reach"] = reach_mask(split.aif, split.blur)
+    if "energy" in mode:
+        out["source"] = energy_source(split.aif, split.bokeh, split.blur)
+    return out
+
+
+@torch.no_grad()
+def predict(model: UNet, aif: np.ndarray, batch: int = 8) -> np.ndarray:
+    model.eval()
+    outs = [model(torch.from_numpy(aif[i : i + batch])).numpy() for i in range(0, len(aif), batch)]
+    model.train()
+    return np.concatenate(outs)
+
+
+def margin_px(blur: np.ndarray, crop: int) -> int:
+    """Pixels left out of the image loss at every crop border: light from outside the crop
+    reaches them in the traced image but not in the render (at most a quarter crop)."""
+    return int(min(math.ceil(float(blur.max())) + 1, crop // 4))
+
+
+def image_loss(
+    layer: Callable[..., torch.Tensor], loss_name: str, cfg: TrainConfig, b: Dict[str, np.ndarray], pred: torch.Tensor
+) -> Tuple[torch.Tensor, Dict[str, float]]:
+    """The self-supervised loss of one batch ``b`` (from :func:`random_crops`, with the
+    highlight mode's arrays): render ``pred`` through ``layer``, compare with the traced
+    image inside the crop's margin. Pixels clipped in the traced image are always left out
+    of L1 (as ``drbokeh dfd`` does); see ``TrainConfig.highlights`` for the rest."""
+    aif = torch.from_numpy(b["aif"])
+    source = torch.from_numpy(b["source"]) if "source" in b else aif
+    target = torch.from_numpy(b["bokeh"])
+    rendered = layer(source, pred, torch.from_numpy(b["focus"]), torch.from_numpy(b["blur"]))
+    if "source" in b:
+        rendered = rendered.clamp(max=1.0)  # the camera clips as the traced PNG is clipped
+    crop = aif.shape[-1]
+    m = margin_px(b["blur"], crop)
+    inner = (slice(None), slice(None), slice(m, crop - m), slice(m, crop - m))
+    r_in, t_in = rendered[inner], target[inner]
+    unclipped = (t_in.amax(1, keepdim=True) < 0.999).to(t_in.dtype)
+    structure_mask = None
+    if "reach" in b:
+        structure_mask = torch.from_numpy(b["reach"])[inner]
+        unclipped = unclipped * structure_mask
+    return defocus_loss(
+        r_in, t_in, pred, aif, loss_name, w_l1=cfg.w_l1, w_smooth=cfg.w_smooth,
+        w_structure=cfg.w_structure, edge_sensitivity=cfg.edge_sensitivity, mask=unclipped,
+        structure_mask=structure_mask,
+    )
+
+
+def train_run(
+    spec: RunSpec,
+    splits: Dict[str, Split],
+    cfg: TrainConfig,
+    out_dir: Path,
+    log: Callable[[str], None] = print,
+) -> Dict[str, object]:
+    """Trains one run; writes ``out_dir/<name>/model.pt`` and ``log.json`` (loss curve,
+    validation MAE curve, seconds per step and per epoch). The validation MAE is logged for
+    the plots only; the last weights are the result (no selection on labels)."""
+    cfg = spec.config(cfg)
+    torch.set_num_threads(cfg.threads)
+    train, val = splits["train"], splits["val"]
+    run_dir = out_dir / spec.name
+    run_dir.mkdir(parents=True, exist_ok=True)
+    model = new_model(cfg)
+    layer = None if spec.layer == "supervised" else make_layer(spec.layer, cfg.threads)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
+    rng = np.random.default_rng(cfg.seed)
+    extra = highlight_arrays(train, cfg.highlights) if layer is not None else {}
+    curve: List[Dict[str, float]] = []
+    val_curve: List[Dict[str, float]] = []
+    step_seconds: List[float] = []
+    n = len(train)
+    order = rng.permutation(n)
+    pos = 0
+    for step in range(cfg.steps):
+        if pos + cfg.batch > n:
+            order, pos = rng.permutation(n), 0
+        idx = order[pos : pos + cfg.batch]
+        pos += cfg.batch
+        b = random_crops(train, idx, cfg.crop, rng, extra)
+        t0 = time.perf_counter()
+        aif = torch.from_numpy(b["aif"])
+        pred = model(aif)
+        if layer is None:
+            loss = (pred - torch.from_numpy(b["disparity"])).abs().mean()
+            terms = {"disparity_l1": float(loss.detach())}
+        else:
+            loss, terms = image_loss(layer, spec.loss, cfg, b, pred)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        step_seconds.append(time.perf_counter() - t0)
+        curve.append({"step": step, "loss": float(loss.detach()), **terms})
+        if (step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps:
+            mae = float(np.abs(predict(model, val.aif) - val.disparity).mean())
+            val_curve.append({"step": step + 1, "val_mae": mae})
+            log(f"{spec.name}: step {step + 1}/{cfg.steps} loss {float(loss.detach()):.4f} val MAE {mae:.4f} "
+                f"({np.mean(step_seconds[-cfg.eval_every:]):.2f} s/step)")
+    steps_per_epoch = n / cfg.batch
+    result: Dict[str, object] = {
+        "run": spec.name,
+        "layer": spec.layer,
+        "loss": spec.loss if spec.layer != "supervised" else "disparity L1",
+        "config": asdict(cfg),
+        "parameters": parameter_count(model),
+        "train_scenes": n,
+        "seconds_per_step": float(np.mean(step_seconds)),
+        "seconds_per_epoch": float(np.mean(step_seconds) * steps_per_epoch),
+        "epochs": cfg.steps / steps_per_epoch,
+        "curve": curve,
+        "val_curve": val_curve,
+    }
+    torch.save(model.state_dict(), run_dir / "model.pt")
+    (run_dir / "log.json").write_text(json.dumps(result))
+    return result
+
+
+def log_line(msg: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
+
+
+def train_logged(spec: RunSpec, splits: Dict[str, Split], cfg: TrainConfig, out_dir: Path) -> None:
+    """:func:`train_run` with progress on stdout (a process pool's worker)."""
+    t0 = time.perf_counter()
+    r = train_run(spec, splits, cfg, out_dir, log_line)
+    log_line(f"{spec.name}: done in {time.perf_counter() - t0:.0f} s ({r['seconds_per_epoch']:.1f} s/epoch)")
+
+
+def load_model(run_dir: Path, cfg: TrainConfig) -> UNet:
+    model = UNet(cfg.base)
+    model.load_state_dict(torch.load(run_dir / "model.pt", weights_only=True))
+    return model
+
+
+def existing(out_dir: Path, spec: RunSpec) -> Optional[Dict[str, object]]:
+    p = out_dir / spec.name / "log.json"
+    return json.loads(p.read_text()) if p.exists() and (out_dir / spec.name / "model.pt").exists() else None

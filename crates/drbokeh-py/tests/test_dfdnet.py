@@ -1,0 +1,278 @@
+"""drbokeh.dfdnet: the losses against their written formulas (the Rust loss module's
+definitions, computed here with plain NumPy loops), the PyTorch GaussPSF and aperture
+layers against NumPy transcriptions of the Rust baselines and with gradcheck, and the
+quick training run (the loss falls; the drbokeh layer beating the untrained network is the
+issue's target, not met, so a strict xfail), the highlight modes' mask and energy."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from conftest import _find_cli  # noqa: E402
+from drbokeh.dfdnet import layers, losses  # noqa: E402
+
+
+def _rand(seed, *shape):
+    return np.random.default_rng(seed).uniform(0.05, 0.95, size=shape)
+
+
+# ---- losses -------------------------------------------------------------------------------
+
+
+def _np_ssim(x, y, radius, sigma):
+    """SSIM of (C, H, W) images by the written formula, one window position at a time."""
+    t = np.arange(-radius, radius + 1)
+    g = np.exp(-(t ** 2) / (2 * sigma ** 2))
+    w2 = np.outer(g, g) / g.sum() ** 2
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    c, h, wd = x.shape
+    vals = []
+    for ch in range(c):
+        for yy in range(radius, h - radius):
+            for xx in range(radius, wd - radius):
+                px = x[ch, yy - radius : yy + radius + 1, xx - radius : xx + radius + 1]
+                py = y[ch, yy - radius : yy + radius + 1, xx - radius : xx + radius + 1]
+                ux, uy = (w2 * px).sum(), (w2 * py).sum()
+                vx = (w2 * px * px).sum() - ux * ux
+                vy = (w2 * py * py).sum() - uy * uy
+                vxy = (w2 * px * py).sum() - ux * uy
+                vals.append((2 * ux * uy + c1) * (2 * vxy + c2) / ((ux * ux + uy * uy + c1) * (vx + vy + c2)))
+    return float(np.mean(vals))
+
+
+def _np_pool(a):
+    h, w = a.shape[-2] // 2, a.shape[-1] // 2
+    a = a[..., : 2 * h, : 2 * w]
+    return 0.25 * (a[..., 0::2, 0::2] + a[..., 1::2, 0::2] + a[..., 0::2, 1::2] + a[..., 1::2, 1::2])
+
+
+def _np_smoothness(d, guide, e):
+    """G by the written formula: d (H, W), guide (C, H, W)."""
+    total = 0.0
+    for level in range(4):
+        if level:
+            d, guide = _np_pool(d), _np_pool(guide)
+        h, w = d.shape
+        sx, sy = [], []
+        for yy in range(h):
+            for xx in range(w - 1):
+                sx.append(abs(d[yy, xx + 1] - d[yy, xx]) * math.exp(-e * np.abs(guide[:, yy, xx + 1] - guide[:, yy, xx]).mean()))
+        for yy in range(h - 1):
+            for xx in range(w):
+                sy.append(abs(d[yy + 1, xx] - d[yy, xx]) * math.exp(-e * np.abs(guide[:, yy + 1, xx] - guide[:, yy, xx]).mean()))
+        total += np.mean(sx) + np.mean(sy)
+    return total / 4
+
+
+def test_l1_and_smoothness_match_their_formulas():
+    x, y = _rand(1, 2, 3, 20, 18), _rand(2, 2, 3, 20, 18)
+    got = losses.l1(torch.from_numpy(x), torch.from_numpy(y)).numpy()
+    assert np.allclose(got, np.abs(x - y).reshape(2, -1).mean(1), rtol=1e-12)
+    d, g = _rand(3, 1, 1, 19, 17), _rand(4, 1, 3, 19, 17)  # odd sides: pooling drops a row
+    for e in (1.0, 10.0):
+        got = float(losses.edge_aware_smoothness(torch.from_numpy(d), torch.from_numpy(g), e)[0])
+        assert got == pytest.approx(_np_smoothness(d[0, 0], g[0], e), rel=1e-10)
+
+
+def test_ssim_and_hssim_match_their_formulas():
+    x = _rand(5, 1, 3, 34, 33)
+    y = np.clip(x + 0.1 * _rand(6, 1, 3, 34, 33) - 0.05, 0, 1)
+    tx, ty = torch.from_numpy(x), torch.from_numpy(y)
+    want = {}
+    for k in losses.HSSIM_WINDOWS:
+        want[k] = _np_ssim(x[0], y[0], (k - 1) // 2, k / 6.0)
+        assert float(losses.ssim_sized(tx, ty, k)[0]) == pytest.approx(want[k], rel=1e-10)
+    assert float(losses.hssim(tx, ty)[0]) == pytest.approx(sum(1 - v for v in want.values()), rel=1e-10)
+    # Identical images: SSIM 1, HSSIM 0; a window too large is refused.
+    assert float(losses.hssim(tx, tx)[0]) == pytest.approx(0.0, abs=1e-12)
+    with pytest.raises(ValueError, match="too large"):
+        losses.ssim_sized(tx[..., :20, :20], ty[..., :20, :20], 21)
+
+
+def test_masked_ssim_is_the_mean_over_kept_window_centres():
+    x = _rand(11, 2, 3, 33, 33)
+    y = np.clip(x + 0.2 * _rand(12, 2, 3, 33, 33) - 0.1, 0, 1)
+    tx, ty = torch.from_numpy(x), torch.from_numpy(y)
+    ones = torch.ones(2, 1, 33, 33, dtype=torch.float64)
+    assert torch.allclose(losses.hssim(tx, ty, ones), losses.hssim(tx, ty), rtol=1e-12)
+    x, y, tx, ty, ones = x[..., :24, :24], y[..., :24, :24], tx[..., :24, :24], ty[..., :24, :24], ones[..., :24, :24]
+    # Keep only window centres in the left half: the mean over those entries of the map.
+    mask = ones.clone()
+    mask[..., 12:] = 0
+    r = 2
+    full = losses.ssim(tx, ty, r, 5 / 6.0, None)
+    got = losses.ssim(tx, ty, r, 5 / 6.0, mask)
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    for b in range(2):
+        vals = []
+        for ch in range(3):
+            for yy in range(r, 24 - r):
+                for xx in range(r, 12):
+                    vals.append(_np_ssim(x[b, ch : ch + 1, yy - r : yy + r + 1, xx - r : xx + r + 1],
+                                         y[b, ch : ch + 1, yy - r : yy + r + 1, xx - r : xx + r + 1], r, 5 / 6.0))
+        assert float(got[b]) == pytest.approx(np.mean(vals), rel=1e-10)
+        assert float(got[b]) != pytest.approx(float(full[b]), rel=1e-6)
+    # Nothing kept: no loss (SSIM 1).
+    assert torch.all(losses.ssim(tx, ty, r, 5 / 6.0, torch.zeros_like(ones)) == 1.0)
+
+
+def test_highlight_reach_and_energy():
+    from drbokeh.dfdnet import highlights
+
+    # Reach: one clipped pixel; K = 4 -> every pixel within 5 px of it is left out.
+    aif = np.full((1, 3, 21, 21), 0.3, np.float32)
+    aif[0, :, 10, 10] = 1.0
+    keep = highlights.reach_mask(aif, np.array([4.0], np.float32))[0, 0]
+    yy, xx = np.mgrid[:21, :21]
+    dist2 = (yy - 10) ** 2 + (xx - 10) ** 2
+    assert np.array_equal(keep == 0, dist2 <= 25)
+    # Energy: a highlight of 6x white (linear) spread into a disc of radius 5 over a
+    # background of 0.2; the clipped pixel gets its light back.
+    bg = 0.2
+    aif = np.full((1, 3, 40, 40), bg ** (1 / 2.2), np.float32)
+    aif[0, :, 20, 20] = 1.0
+    yy, xx = np.mgrid[:40, :40]
+    disc = (yy - 20) ** 2 + (xx - 20) ** 2 <= 25
+    lin = np.full((3, 40, 40), bg)
+    lin[:, disc] += (6.0 - bg) / disc.sum()
+    bokeh = (lin ** (1 / 2.2)).astype(np.float32)[None]
+    src = highlights.energy_source(aif, bokeh, np.array([6.0], np.float32))
+    assert src[0, :, 20, 20] ** 2.2 == pytest.approx([6.0] * 3, rel=1e-3)
+    unclipped = np.ones((40, 40), bool)
+    unclipped[20, 20] = False
+    assert np.array_equal(src[0][:, unclipped], aif[0][:, unclipped])
+
+
+def test_run_names_round_trip():
+    from drbokeh.dfdnet.train import TABLE_RUNS, parse_run
+
+    for spec in TABLE_RUNS:
+        assert parse_run(spec.name) == spec
+    assert parse_run("physical-hssim-none").highlights == "none"
+    with pytest.raises(ValueError, match="unknown run"):
+        parse_run("physical-hssim-bright")
+
+
+# ---- layers: NumPy transcriptions of crates/drbokeh/src/baselines ---------------------------
+
+
+def _np_gausspsf(aif, disp, focus, k, gamma=2.2):
+    """gauss_psf.rs forward: aif (H, W, 3), disp (H, W)."""
+    h, w, _ = aif.shape
+    lin = aif ** gamma
+    sig = np.sqrt((k * (disp - focus) * 0.5) ** 2 + 0.25)
+    r = max(1, math.ceil(3 * max(0.5, float(sig.max()))))
+    out = np.zeros_like(aif)
+    for y in range(h):
+        for x in range(w):
+            c, ws = np.zeros(3), 0.0
+            for dy in range(-r, r + 1):
+                for dx in range(-r, r + 1):
+                    sx, sy = x + dx, y + dy
+                    if 0 <= sx < w and 0 <= sy < h:
+                        s = sig[sy, sx]
+                        wt = math.exp(-(dx * dx + dy * dy) / (2 * s * s)) / (s * s)
+                        c += wt * lin[sy, sx]
+                        ws += wt
+            out[y, x] = (c / ws) ** (1 / gamma)
+    return out
+
+
+def _np_aperture(aif, disp, focus, k, gamma=2.2):
+    """aperture_compositing.rs forward: bilinear samples with clamped coordinates."""
+    h, w, _ = aif.shape
+    lin = aif ** gamma
+    samples = layers.aperture_samples(128)
+    out = np.zeros_like(aif)
+    for y in range(h):
+        for x in range(w):
+            shift = k * (disp[y, x] - focus)
+            acc = np.zeros(3)
+            for u, v in samples:
+                fx = min(max(x + shift * u, 0.0), w - 1.0)
+                fy = min(max(y + shift * v, 0.0), h - 1.0)
+                x0, y0 = int(math.floor(fx)), int(math.floor(fy))
+                x1, y1 = min(x0 + 1, w - 1), min(y0 + 1, h - 1)
+                tx, ty = fx - x0, fy - y0
+                acc += (1 - ty) * ((1 - tx) * lin[y0, x0] + tx * lin[y0, x1]) + ty * ((1 - tx) * lin[y1, x0] + tx * lin[y1, x1])
+            out[y, x] = (acc / len(samples)) ** (1 / gamma)
+    return out
+
+
+@pytest.mark.parametrize("name", ["gausspsf", "aperture"])
+def test_baseline_layers_match_the_rust_loops_and_have_gradients(name):
+    aif = _rand(7, 10, 11, 3)
+    disp = _rand(8, 10, 11)
+    focus, k = 0.8, 3.0
+    ref = (_np_gausspsf if name == "gausspsf" else _np_aperture)(aif, disp, focus, k)
+    layer = layers.make_layer(name)
+    t_aif = torch.from_numpy(aif.transpose(2, 0, 1)[None].copy())
+    t_disp = torch.from_numpy(disp[None, None].copy()).requires_grad_(True)
+    f, kk = torch.tensor([focus], dtype=torch.float64), torch.tensor([k], dtype=torch.float64)
+    got = layer(t_aif, t_disp, f, kk)[0].detach().numpy().transpose(1, 2, 0)
+    assert np.abs(got - ref).max() < 1e-7
+    # Gradients with respect to the disparity, against finite differences.
+    small = (t_aif[..., :6, :7].clone(), t_disp[..., :6, :7].detach().clone().requires_grad_(True))
+    assert torch.autograd.gradcheck(lambda d: layer(small[0], d, f, kk), (small[1],), eps=1e-6, atol=1e-5)
+
+
+def test_drbokeh_layer_renders_one_opaque_layer():
+    import drbokeh
+
+    aif, disp = _rand(9, 16, 16, 3).astype(np.float32), _rand(10, 16, 16).astype(np.float32)
+    layer = layers.make_layer("physical")
+    got = layer(
+        torch.from_numpy(aif.transpose(2, 0, 1)[None].copy()), torch.from_numpy(disp[None, None].copy()),
+        torch.tensor([1.0]), torch.tensor([4.0]),
+    )[0].numpy().transpose(1, 2, 0)
+    want = drbokeh.render(aif[None], np.ones((1, 16, 16), np.float32), disp[None], focus=1.0, blur=4.0, preset="physical")
+    assert np.abs(got - want).max() < 1e-6
+
+
+# ---- the quick training run -----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    """``train --quick`` once for the tests below: tiny ray-traced data made through the CLI,
+    40 steps through the drbokeh ``physical`` layer (L1+G+HSSIM, highlights ``energy``)."""
+    out = tmp_path_factory.mktemp("dfdnet") / "q"
+    env = dict(os.environ, DRBOKEH_CLI=str(_find_cli()))
+    p = subprocess.run(
+        [sys.executable, "-m", "drbokeh.dfdnet", "train", "--quick", "--out", str(out)],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    assert p.returncode == 0, p.stderr + p.stdout
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_quick_training_loss_falls_and_is_recorded(quick_run):
+    out, r = quick_run
+    assert r["loss_last"] < 0.9 * r["loss_first"], r
+    assert 0.0 < r["test_mae_trained"] < 1.0 and 0.0 < r["test_mae_untrained"] < 1.0, r
+    assert (out / "physical-hssim" / "model.pt").is_file()
+    log = json.loads((out / "physical-hssim" / "log.json").read_text())
+    assert len(log["curve"]) == r["steps"] and log["parameters"] > 0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 17's target, not met: on traced pairs the background is untextured, so the "
+    "defocus loss leaves its disparity undetermined and the network drifts from the untrained "
+    "level instead of learning depth (docs/dfdnet.md; quick run: 0.54 vs 0.45)",
+)
+def test_quick_training_beats_the_untrained_network(quick_run):
+    """The issue's check: the network trained through drbokeh ``physical`` has a lower test
+    MAE than the same network untrained, by at least 0.02 (the untrained one is at about
+    0.45). Strict xfail: when it starts passing, this marker must go."""
+    _, r = quick_run
+    assert r["test_mae_trained"] < r["test_mae_untrained"] - 0.02, r
