@@ -48,7 +48,7 @@ mod sources;
 use super::geometry::{GaugeTable, Shape};
 use super::{render_recording, Choice};
 use crate::engine::fast;
-use crate::engine::fast::adjoint::{backward_with, pass_sources};
+use crate::engine::fast::adjoint::{backward_with, pass_sources, REFINE_WEIGHT_BELOW};
 use crate::engine::fast::tiles::WindowTables;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
@@ -109,6 +109,17 @@ impl<T: Real> Backward<T> for SpanTape<T> {
         let table = shape
             .as_ref()
             .map(|_| GaugeTable::<T>::new(&settings.aperture, big_r, -1));
+        // Tail receivers of pass B (`sources.rs`): recorded weight sums below the
+        // refinement threshold.
+        let tail: Vec<Vec<bool>> = self
+            .saved
+            .iter()
+            .map(|s| {
+                s.iter()
+                    .map(|p| p.weight.f64() < REFINE_WEIGHT_BELOW)
+                    .collect()
+            })
+            .collect();
         backward_with(
             &self.stack,
             settings,
@@ -117,7 +128,7 @@ impl<T: Real> Backward<T> for SpanTape<T> {
             progress,
             |ctx, l| match (&shape, &table) {
                 (Some(shape), Some(table)) if self.span_rows[l].iter().any(|&s| s) => {
-                    sources::pass_sources(ctx, shape, table, &self.span_rows[l])
+                    sources::pass_sources(ctx, shape, table, &self.span_rows[l], &tail[l])
                 }
                 _ => pass_sources(ctx),
             },

@@ -1,11 +1,26 @@
 //! Pass B of the span adjoint: per padded source, the gradients reaching `Ilin(y)`, `a(y)`,
 //! `d(y)` (through `S`, `A` and `O`) and K (through `r(y)`), summed over its disc row by
 //! row: on span rows the interior from prefix sums of the receivers' upstream gradients,
-//! the ring and the in-focus receivers tap by tap; on tap rows every tap within the fast
-//! adjoint's reach. The transpose of `scatter.rs`.
+//! the ring (the forward's) in 8-lane runs (the fast adjoint's [`source_run`]), the
+//! in-focus receivers of the interior and the tail receivers (below) tap by tap; on tap
+//! rows every tap within the fast adjoint's reach, in runs. The transpose of `scatter.rs`.
+//!
+//! **Tail receivers.** Beyond the forward's ring (`r + u_out`) a tap weighs at most
+//! `1.4e-7` (paper) or `6.8e-8` (sharp) of a unit tap, which matters only where the
+//! receiver's upstream factor `dL/dW ~ o / W` is large: receivers whose recorded weight
+//! sum is below the refinement threshold (`W < 1e-2`, summed over the whole window before
+//! the chain rule, `engine/fast/adjoint/refine.rs`). Those get every tap out to the fast
+//! adjoint's reach `r + 6` (measured without them: 1.8e-2 of the largest alpha gradient at
+//! a layer's edge, preset physical); elsewhere `dL/dW <= |dL/dB| o / 1e-2` and the dropped
+//! tail is at most `1e-5` of a unit tap's gradient per source row.
+//!
+//! **Skipped sources.** A source none of whose reachable receivers (the bounding box of
+//! `r + 6`) has a non-zero `dL/dC` or `dL/dW` has all sums exactly zero (a summed-area
+//! count decides it in O(1)); zero-alpha sources need only `sum gc S O` (their alpha
+//! gradient), the runs' alpha-only variant.
 
 use super::super::geometry::{disc_row, GaugeTable, Rings, Shape, STEP_ARGUMENT_MIN, TABLE_MARGIN};
-use crate::engine::fast::adjoint::{Ctx, SourceGradients};
+use crate::engine::fast::adjoint::{source_run, Ctx, SourceGradients, SourceTerms};
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, SCATTER_TAIL_PX};
 use crate::Real;
@@ -14,38 +29,100 @@ use rayon::prelude::*;
 /// Components of the receivers' upstream gradient: `dL/dC` (3) and `dL/dW`.
 const COMPONENTS: usize = 4;
 
-/// How far beyond `r` pass B reaches (in gauge units), on span rows (the ring's outer
-/// edge) and tap rows alike: the fast adjoint's `r + 4.5 + 1.5` (`engine/fast/tiles.rs`,
-/// `backward_reach`). Not the forward's `r + u_out` (2.75 px for the sharp step): where a
-/// layer ends, receivers just beyond a disc's edge have a weight sum `W` of the order of
-/// the tail (refined over the whole window, `engine/fast/adjoint/refine.rs`) but a soft-disc
-/// coverage `o` of the receiver's own radius that is not small, so their upstream factors
-/// `dL/dW ~ o / W` are huge and the tail taps carry O(1) gradients (measured: 1.8e-2 of
-/// the largest alpha gradient with the ring ending at 2.75 px, preset physical).
+/// How far beyond `r` pass B reaches (in gauge units) on tap rows, and for tail receivers
+/// on span rows: the fast adjoint's `r + 4.5 + 1.5` (`engine/fast/tiles.rs`,
+/// `backward_reach`).
 const TAP_ROW_TAIL_PX: f64 = SCATTER_TAIL_PX + 1.5;
 
-/// The receivers' side of pass B, per image row.
+/// A sparse set of receivers per image row: prefix counts (`w + 1` per row) and columns.
+struct RowSet {
+    count: Vec<u32>,
+    cols: Vec<u32>,
+    start: Vec<usize>,
+}
+
+impl RowSet {
+    fn new(w: usize, h: usize, member: impl Fn(usize) -> bool) -> Self {
+        let mut count = vec![0u32; h * (w + 1)];
+        let mut cols = Vec::new();
+        let mut start = Vec::with_capacity(h + 1);
+        for y in 0..h {
+            start.push(cols.len());
+            for x in 0..w {
+                let inside = member(y * w + x);
+                count[y * (w + 1) + x + 1] = count[y * (w + 1) + x] + u32::from(inside);
+                if inside {
+                    cols.push(x as u32);
+                }
+            }
+        }
+        start.push(cols.len());
+        RowSet { count, cols, start }
+    }
+
+    /// The members of row `y` in columns `xa ..= xb`.
+    #[inline(always)]
+    fn within(&self, w: usize, y: usize, (xa, xb): (isize, isize)) -> &[u32] {
+        if xa > xb {
+            return &[];
+        }
+        let count = &self.count[y * (w + 1)..];
+        let (ca, cb) = (count[xa as usize] as usize, count[xb as usize + 1] as usize);
+        &self.cols[self.start[y]..self.start[y + 1]][ca..cb]
+    }
+
+    /// Whether row `y` has a member in columns `xa ..= xb`.
+    #[inline(always)]
+    fn any(&self, w: usize, y: usize, (xa, xb): (isize, isize)) -> bool {
+        let count = &self.count[y * (w + 1)..];
+        count[xb as usize + 1] > count[xa as usize]
+    }
+}
+
+/// The receivers' side of pass B.
 struct RowData {
     /// Prefix sums `[y][x][component]` (`w + 1` entries per row) of `gC` and `gW`.
     prefix: Vec<f64>,
-    /// Per row, the prefix count of receivers whose occlusion term is evaluated
-    /// (`w + 1` entries per row).
-    focus_count: Vec<u32>,
-    /// Per row, their columns (row `y`'s from `focus_start[y]`).
-    focus_cols: Vec<u32>,
-    focus_start: Vec<usize>,
+    /// Receivers whose occlusion term is evaluated (`e(x) > 0` after the cutoff).
+    focus: RowSet,
+    /// Tail receivers (see the module documentation).
+    tail: RowSet,
+    /// Summed-area count (`(h + 1) x (w + 1)`) of receivers with a non-zero `gC` or `gW`.
+    nonzero: Vec<u32>,
+}
+
+impl RowData {
+    /// Whether a receiver in image columns `x0 ..= x1`, rows `y0 ..= y1` (clipped) has a
+    /// non-zero upstream gradient.
+    fn any_nonzero(&self, w: usize, h: usize, (x0, x1): (isize, isize), (y0, y1): (isize, isize)) -> bool {
+        let (x0, x1) = (x0.max(0) as usize, (x1 + 1).clamp(0, w as isize) as usize);
+        let (y0, y1) = (y0.max(0) as usize, (y1 + 1).clamp(0, h as isize) as usize);
+        if x0 >= x1 || y0 >= y1 {
+            return false;
+        }
+        let s1 = w + 1;
+        self.nonzero[y1 * s1 + x1] + self.nonzero[y0 * s1 + x0]
+            > self.nonzero[y0 * s1 + x1] + self.nonzero[y1 * s1 + x0]
+    }
 }
 
 /// Pass B over every padded source of the layer (`span_rows[y]`: whether receiver row `y`
-/// was rendered as spans).
+/// was rendered as spans; `tail[i]`: whether receiver `i` is a tail receiver).
 pub(super) fn pass_sources<T: Real>(
     ctx: &Ctx<'_, T>,
     shape: &Shape,
     table: &GaugeTable<T>,
     span_rows: &[bool],
+    tail: &[bool],
 ) -> SourceGradients<T> {
     let (src, rcv) = (ctx.src, ctx.rcv);
     let (w, h) = (rcv.width, rcv.height);
+    let is_nonzero = |i: usize| {
+        rcv.g_red[i] != T::zero()
+            || rcv.g_green[i] != T::zero()
+            || rcv.g_blue[i] != T::zero()
+            || rcv.g_weight[i] != T::zero()
+    };
     let prefix: Vec<f64> = (0..h)
         .into_par_iter()
         .flat_map_iter(|y| {
@@ -62,25 +139,20 @@ pub(super) fn pass_sources<T: Real>(
             row
         })
         .collect();
-    let mut focus_count = vec![0u32; h * (w + 1)];
-    let mut focus_cols = Vec::new();
-    let mut focus_start = Vec::with_capacity(h + 1);
+    let s1 = w + 1;
+    let mut nonzero = vec![0u32; (h + 1) * s1];
     for y in 0..h {
-        focus_start.push(focus_cols.len());
+        let mut run = 0u32;
         for x in 0..w {
-            let inside = rcv.focus_weight[y * w + x] > T::zero();
-            focus_count[y * (w + 1) + x + 1] = focus_count[y * (w + 1) + x] + u32::from(inside);
-            if inside {
-                focus_cols.push(x as u32);
-            }
+            run += u32::from(is_nonzero(y * w + x));
+            nonzero[(y + 1) * s1 + x + 1] = nonzero[y * s1 + x + 1] + run;
         }
     }
-    focus_start.push(focus_cols.len());
     let data = RowData {
         prefix,
-        focus_count,
-        focus_cols,
-        focus_start,
+        focus: RowSet::new(w, h, |i| rcv.focus_weight[i] > T::zero()),
+        tail: RowSet::new(w, h, |i| tail[i] && is_nonzero(i)),
+        nonzero,
     };
     let rows: Vec<(Vec<[T; 5]>, f64)> = (0..src.rows)
         .into_par_iter()
@@ -126,14 +198,12 @@ avx2_dispatch!(
 /// A source's terms.
 #[derive(Clone, Copy)]
 struct Source<T> {
-    radius: T,
-    /// `A'(r) / A(r)`.
-    dlog_area: T,
-    rel_disp: T,
-    lin: [T; 3],
+    terms: SourceTerms<T>,
     /// Image column and row.
     xs: isize,
     ys: isize,
+    /// Alpha > 0: every sum; else only `sum gc S O`.
+    full: bool,
 }
 
 /// The sums of pass B for one source: `[sum gC S O (3), sum gc S O, sum gc O (S' - S A'/A),
@@ -153,19 +223,30 @@ fn source_row<T: Real>(
 ) -> (Vec<[T; 5]>, f64) {
     let src = ctx.src;
     let (stride, pad) = (src.stride, src.pad);
+    let (w, h) = (ctx.rcv.width, ctx.rcv.height);
     let k = ctx.k;
+    let big_r = table.big_r as f64;
     let mut out = vec![[T::zero(); 5]; stride];
     let mut k_row = 0.0f64;
     for px in 0..stride {
         let p = py * stride + px;
         let (a, r) = (src.alpha[p], src.radius[p]);
+        let (xs, ys) = (px as isize - pad as isize, py as isize - pad as isize);
+        let reach = (r.f64() + TAP_ROW_TAIL_PX).min(big_r).floor() as isize;
+        if !data.any_nonzero(w, h, (xs - reach, xs + reach), (ys - reach, ys + reach)) {
+            continue;
+        }
         let s = Source {
-            radius: r,
-            dlog_area: model::source_area_log_derivative(src.step, r),
-            rel_disp: src.rel_disp[p],
-            lin: [src.red[p], src.green[p], src.blue[p]],
-            xs: px as isize - pad as isize,
-            ys: py as isize - pad as isize,
+            terms: SourceTerms {
+                step: src.step,
+                radius: r,
+                dlog_area: model::source_area_log_derivative(src.step, r),
+                rel_disp: src.rel_disp[p],
+                lin: [src.red[p], src.green[p], src.blue[p]],
+            },
+            xs,
+            ys,
+            full: a != T::zero(),
         };
         let acc = match src.step {
             model::ScatterStep::Sharp => {
@@ -178,7 +259,7 @@ fn source_row<T: Real>(
         let inv_area = src.inv_area[p];
         let a_inv = a * inv_area;
         let g_r = acc[4] * a_inv;
-        let d_y = s.rel_disp;
+        let d_y = s.terms.rel_disp;
         out[px] = [
             acc[0] * a_inv,
             acc[1] * a_inv,
@@ -203,14 +284,16 @@ fn add_tap<T: Real>(
     acc: &mut Sums<T>,
 ) {
     let rcv = ctx.rcv;
+    let lin = src.terms.lin;
     let g = [rcv.g_red[i], rcv.g_green[i], rcv.g_blue[i]];
-    let gc = g[0] * src.lin[0] + g[1] * src.lin[1] + g[2] * src.lin[2] + rcv.g_weight[i];
+    let gc = g[0] * lin[0] + g[1] * lin[1] + g[2] * lin[2] + rcv.g_weight[i];
     let so = s * o;
     for c in 0..3 {
         acc[c] = acc[c] + g[c] * so;
     }
     acc[3] = acc[3] + gc * so;
-    acc[4] = acc[4] + gc * o * model::normalised_scatter_radius_factor(s, sd, src.dlog_area);
+    acc[4] =
+        acc[4] + gc * o * model::normalised_scatter_radius_factor(s, sd, src.terms.dlog_area);
     acc[5] = acc[5] + gc * s * d_o;
 }
 
@@ -221,42 +304,75 @@ fn add_tap<T: Real>(
 fn occlusion<T: Real>(ctx: &Ctx<'_, T>, src: &Source<T>, i: usize, centre: bool) -> (T, T) {
     let e = ctx.rcv.focus_weight[i];
     if e > T::zero() && !centre {
-        model::occlusion_fast_with_derivative(e, src.rel_disp, ctx.rcv.rel_disp[i])
+        model::occlusion_fast_with_derivative(e, src.terms.rel_disp, ctx.rcv.rel_disp[i])
     } else {
         (T::one(), T::zero())
     }
 }
 
-/// The exact taps of receiver columns `xa ..= xb` of image row `yr` (row offset `dy`).
+/// The exact tap of receiver column `x` of image row `yr` (row offset `dy`), scalar.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn exact_taps<T: Real, const SHARP: bool>(
+fn exact_tap<T: Real, const SHARP: bool>(
     ctx: &Ctx<'_, T>,
     table: &GaugeTable<T>,
     src: &Source<T>,
-    yr: usize,
-    dy: isize,
-    (xa, xb): (isize, isize),
+    (yr, dy): (usize, isize),
+    x: isize,
     acc: &mut Sums<T>,
 ) {
     let w = ctx.rcv.width;
-    let step = ctx.src.step;
     let t = (dy + table.big_r as isize) as usize;
-    let base = t * table.stride + table.big_r + TABLE_MARGIN;
-    for x in xa..=xb {
-        let m = (base as isize + x - src.xs) as usize;
-        let (g, mask) = (table.gauge[m], table.mask[m]);
-        let u = (src.radius - g).max(T::c(STEP_ARGUMENT_MIN));
-        let s = if SHARP {
-            model::sharp_step_fast(u)
-        } else {
-            model::soft_step_fast(u)
-        } * mask;
-        let sd = model::scatter_step_derivative(step, s);
-        let i = yr * w + x as usize;
-        let centre = dy == 0 && x == src.xs;
-        let o = occlusion(ctx, src, i, centre);
-        add_tap(ctx, src, i, (s, sd), o, acc);
+    let m = (t * table.stride + table.big_r + TABLE_MARGIN) as isize + x - src.xs;
+    let (g, mask) = (table.gauge[m as usize], table.mask[m as usize]);
+    let u = (src.terms.radius - g).max(T::c(STEP_ARGUMENT_MIN));
+    let s = if SHARP {
+        model::sharp_step_fast(u)
+    } else {
+        model::soft_step_fast(u)
+    } * mask;
+    let sd = model::scatter_step_derivative(ctx.src.step, s);
+    let i = yr * w + x as usize;
+    let centre = dy == 0 && x == src.xs;
+    let o = occlusion(ctx, src, i, centre);
+    add_tap(ctx, src, i, (s, sd), o, acc);
+}
+
+/// The taps of receiver columns `xa ..= xb` of image row `yr` (row offset `dy`): 8-lane
+/// runs (the fast adjoint's), the centre tap (`O = 1`) scalar.
+#[inline(always)]
+fn run_taps<T: Real, const SHARP: bool>(
+    ctx: &Ctx<'_, T>,
+    table: &GaugeTable<T>,
+    data: &RowData,
+    src: &Source<T>,
+    (yr, dy): (usize, isize),
+    (xa, xb): (isize, isize),
+    acc: &mut Sums<T>,
+) {
+    if xa > xb {
+        return;
+    }
+    if dy == 0 && (xa..=xb).contains(&src.xs) {
+        run_taps::<T, SHARP>(ctx, table, data, src, (yr, dy), (xa, src.xs - 1), acc);
+        exact_tap::<T, SHARP>(ctx, table, src, (yr, dy), src.xs, acc);
+        run_taps::<T, SHARP>(ctx, table, data, src, (yr, dy), (src.xs + 1, xb), acc);
+        return;
+    }
+    let w = ctx.rcv.width;
+    let big_r = ctx.tables.big_r as isize;
+    let occ = data.focus.any(w, yr, (xa, xb));
+    let (i0, n) = (yr * w + xa as usize, (xb - xa + 1) as usize);
+    let g0 = (xa - src.xs + big_r) as usize;
+    let gauge = &ctx.gauge_flip[(dy + big_r) as usize][g0..g0 + n];
+    let rcv = ctx.rcv;
+    let v = match (occ, src.full) {
+        (true, true) => source_run::<T, true, true>(rcv, i0, gauge, src.terms),
+        (true, false) => source_run::<T, true, false>(rcv, i0, gauge, src.terms),
+        (false, true) => source_run::<T, false, true>(rcv, i0, gauge, src.terms),
+        (false, false) => source_run::<T, false, false>(rcv, i0, gauge, src.terms),
+    };
+    for (a, b) in acc.iter_mut().zip(v) {
+        *a = *a + b;
     }
 }
 
@@ -271,16 +387,9 @@ fn source_sums<T: Real, const SHARP: bool>(
     src: Source<T>,
 ) -> Sums<T> {
     let (w, h) = (ctx.rcv.width as isize, ctx.rcv.height as isize);
-    // The forward's interior; the ring out to the tap rows' reach (see TAP_ROW_TAIL_PX).
-    let rings = Rings {
-        inner_px: Rings::of(ctx.src.step).inner_px,
-        outer_px: TAP_ROW_TAIL_PX,
-    };
-    let big_r = table.big_r as f64;
-    let rf = src.radius.f64();
-    let span_reach = (rf + rings.outer_px).min(big_r).floor() as isize;
-    let tap_reach = (rf + TAP_ROW_TAIL_PX).min(big_r).floor() as isize;
-    let reach = span_reach.max(tap_reach);
+    let rings = Rings::of(ctx.src.step);
+    let rf = src.terms.radius.f64();
+    let reach = (rf + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize;
     let mut acc: Sums<T> = [T::zero(); 6];
     // Interior sums of gC and gW (S = 1, O = 1).
     let mut interior = [0.0f64; COMPONENTS];
@@ -294,23 +403,36 @@ fn source_sums<T: Real, const SHARP: bool>(
         };
         let yr = yr as usize;
         let clip = |(lo, hi): (isize, isize)| ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
+        // Every tap within the fast adjoint's reach on this row.
+        let Some((lo, hi)) = shape.interval(rf + TAP_ROW_TAIL_PX, dy, -1.0) else {
+            continue;
+        };
+        let hwi = hw as isize;
+        let (fa, fb) = clip((lo.max(-hwi), hi.min(hwi)));
+        if fa > fb {
+            continue;
+        }
         if !span_rows[yr] {
-            if dy.abs() > tap_reach {
-                continue;
-            }
-            if let Some((lo, hi)) = shape.interval(rf + TAP_ROW_TAIL_PX, dy, -1.0) {
-                let hw = hw as isize;
-                let (xa, xb) = clip((lo.max(-hw), hi.min(hw)));
-                if xa <= xb {
-                    exact_taps::<T, SHARP>(ctx, table, &src, yr, dy, (xa, xb), &mut acc);
-                }
-            }
+            run_taps::<T, SHARP>(ctx, table, data, &src, (yr, dy), (fa, fb), &mut acc);
             continue;
         }
-        if dy.abs() > span_reach {
-            continue;
+        let disc = disc_row(shape, rings, rf, dy, hw, -1.0);
+        // The columns the forward's disc row covers (image columns; empty if none).
+        let (da, db) = match disc {
+            None => (fb + 1, fb),
+            Some(d) => {
+                let first = d.left.or(d.interior).map_or(0, |r| r.0);
+                let last = d.right.or(d.interior).or(d.left).map_or(-1, |r| r.1);
+                clip((first, last))
+            }
+        };
+        // Tail receivers beyond the forward's ring: exact taps.
+        for part in [(fa, fb.min(da - 1)), (fa.max(db + 1), fb)] {
+            for &x in data.tail.within(ctx.rcv.width, yr, part) {
+                exact_tap::<T, SHARP>(ctx, table, &src, (yr, dy), x as isize, &mut acc);
+            }
         }
-        let Some(disc) = disc_row(shape, rings, rf, dy, hw, -1.0) else {
+        let Some(disc) = disc else {
             continue;
         };
         if let Some(run) = disc.interior {
@@ -322,44 +444,36 @@ fn source_sums<T: Real, const SHARP: bool>(
                     interior[c] += row[ib + c] - row[ia + c];
                 }
                 // Receivers whose occlusion term is evaluated: O - 1 and dO/dd_y on top.
-                let count = &data.focus_count[yr * (ctx.rcv.width + 1)..];
-                let (ca, cb) = (count[xa as usize] as usize, count[xb as usize + 1] as usize);
-                if cb > ca {
-                    let cols = &data.focus_cols[data.focus_start[yr]..data.focus_start[yr + 1]];
-                    for &x in &cols[ca..cb] {
-                        let i = yr * ctx.rcv.width + x as usize;
-                        let centre = dy == 0 && x as isize == src.xs;
-                        if centre {
-                            continue;
-                        }
-                        let (o, d_o) = occlusion(ctx, &src, i, false);
-                        add_tap(
-                            ctx,
-                            &src,
-                            i,
-                            (T::one(), T::zero()),
-                            (o - T::one(), d_o),
-                            &mut acc,
-                        );
+                for &x in data.focus.within(ctx.rcv.width, yr, (xa, xb)) {
+                    if dy == 0 && x as isize == src.xs {
+                        continue;
                     }
+                    let i = yr * ctx.rcv.width + x as usize;
+                    let (o, d_o) = occlusion(ctx, &src, i, false);
+                    add_tap(
+                        ctx,
+                        &src,
+                        i,
+                        (T::one(), T::zero()),
+                        (o - T::one(), d_o),
+                        &mut acc,
+                    );
                 }
             }
         }
         for run in [disc.left, disc.right].into_iter().flatten() {
-            let (xa, xb) = clip(run);
-            if xa <= xb {
-                exact_taps::<T, SHARP>(ctx, table, &src, yr, dy, (xa, xb), &mut acc);
-            }
+            run_taps::<T, SHARP>(ctx, table, data, &src, (yr, dy), clip(run), &mut acc);
         }
     }
     // The interior's terms: S = 1, S' = 0, O = 1.
     let ic: [T; COMPONENTS] = interior.map(T::c);
-    let gc = ic[0] * src.lin[0] + ic[1] * src.lin[1] + ic[2] * src.lin[2] + ic[3];
+    let lin = src.terms.lin;
+    let gc = ic[0] * lin[0] + ic[1] * lin[1] + ic[2] * lin[2] + ic[3];
     for c in 0..3 {
         acc[c] = acc[c] + ic[c];
     }
     acc[3] = acc[3] + gc;
-    acc[4] =
-        acc[4] + gc * model::normalised_scatter_radius_factor(T::one(), T::zero(), src.dlog_area);
+    acc[4] = acc[4]
+        + gc * model::normalised_scatter_radius_factor(T::one(), T::zero(), src.terms.dlog_area);
     acc
 }
