@@ -140,6 +140,7 @@ impl<T: Real> Backward<T> for FastTape<T> {
             grad_output,
             progress,
             |ctx, _| sources::pass_sources(ctx),
+            None,
         )
     }
 }
@@ -158,6 +159,7 @@ pub(in crate::engine) fn backward_with<T: Real>(
     grad_output: &Image<T>,
     progress: &dyn Progress,
     pass_sources: impl Fn(&Ctx<'_, T>, usize) -> SourceGradients<T>,
+    soft_disc: Option<&SoftDiscHooks<'_, T>>,
 ) -> Result<Gradients<T>> {
     let (w, h) = (stack.width, stack.height);
     let n_layers = stack.layers.len();
@@ -168,7 +170,7 @@ pub(in crate::engine) fn backward_with<T: Real>(
         settings,
         grad_output,
         progress,
-        || prepare(stack, settings),
+        || prepare(stack, settings, soft_disc.map(|h| h.sums)),
         |state| {
             // The soft disc's recomputed coverage replaces the recorded one.
             let saved: Vec<Vec<LayerAtPixel<T>>> = saved
@@ -231,7 +233,10 @@ pub(in crate::engine) fn backward_with<T: Real>(
             progress.advance(1);
             let g_alpha_coverage = match options.coverage {
                 Coverage::PaperBox => coverage::pass_coverage_box(&ctx),
-                Coverage::SoftDisc => coverage::pass_coverage_disc(&ctx, &share),
+                Coverage::SoftDisc => match soft_disc {
+                    Some(h) => (h.pass_coverage)(&ctx, &share),
+                    None => coverage::pass_coverage_disc(&ctx, &share),
+                },
             };
             progress.advance(1);
             LayerPartials {
@@ -246,11 +251,22 @@ pub(in crate::engine) fn backward_with<T: Real>(
     )
 }
 
+/// Another schedule's soft-disc coverage (the span adjoint's): every receiver's sums
+/// with derivatives from a layer's padded planes, and pass C (per image pixel, folded).
+pub(in crate::engine) struct SoftDiscHooks<'a, T> {
+    pub sums: &'a (dyn Fn(&Planes<T>) -> Vec<DiscCoverage<T>> + Sync),
+    pub pass_coverage: &'a (dyn Fn(&Ctx<'_, T>, &[T]) -> Vec<T> + Sync),
+}
+
 /// The window tables, every layer's prepared terms and padded planes, and (soft disc)
 /// the coverage with its derivative over the backward's longer reach: its value
 /// replaces the recorded one (whose shorter tail weighs up to 1.5e-5 of Z at
 /// r_c ~ 0), so that o and do/dr come from the same sums.
-fn prepare<T: Real>(stack: &LayerStack<T>, settings: &RenderSettings) -> State<T> {
+fn prepare<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    disc_sums_with: Option<&(dyn Fn(&Planes<T>) -> Vec<DiscCoverage<T>> + Sync)>,
+) -> State<T> {
     let options = settings.model();
     let (w, h) = (stack.width, stack.height);
     let tables = WindowTables::<T>::new(settings);
@@ -271,6 +287,9 @@ fn prepare<T: Real>(stack: &LayerStack<T>, settings: &RenderSettings) -> State<T
         .map(|src| {
             if options.coverage != Coverage::SoftDisc {
                 return Vec::new();
+            }
+            if let Some(f) = disc_sums_with {
+                return f(src);
             }
             (0..w * h)
                 .into_par_iter()

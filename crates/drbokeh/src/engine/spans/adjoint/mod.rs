@@ -43,12 +43,18 @@
 //! `spans/mod.rs`), so the chain rule's upstream factors carry the forward's error too; the
 //! gradients agree with the exact adjoint to within a few `1e-5` of their largest value.
 
+mod disc;
 mod sources;
 
 use super::geometry::{GaugeTable, Shape};
 use super::{render_recording, Choice};
 use crate::engine::fast;
-use crate::engine::fast::adjoint::{backward_with, pass_sources, REFINE_WEIGHT_BELOW};
+use crate::engine::backward::fold_padded;
+use crate::engine::fast::adjoint::{
+    backward_with, pass_sources, Ctx, SoftDiscHooks, REFINE_WEIGHT_BELOW,
+};
+use crate::engine::planes::Planes;
+use disc::DiscCtx;
 use crate::engine::fast::tiles::WindowTables;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
@@ -120,6 +126,28 @@ impl<T: Real> Backward<T> for SpanTape<T> {
                     .collect()
             })
             .collect();
+        // The soft disc as spans (circle and polygon apertures).
+        let options = settings.model();
+        let (w, h) = (self.stack.width, self.stack.height);
+        let gather = shape
+            .as_ref()
+            .filter(|_| options.coverage == Coverage::SoftDisc)
+            .map(|shape| (shape, GaugeTable::<T>::new(&settings.aperture, big_r, 1)));
+        let coverage_radius = (options.coverage_radius, options.footprint.px());
+        let sums = |src: &Planes<T>| {
+            let (shape, table) = gather.as_ref().expect("hooks only with a gather table");
+            disc::disc_sums(&DiscCtx::new(src, shape, table, (w, h), coverage_radius))
+        };
+        let pass_coverage = |ctx: &Ctx<'_, T>, share: &[T]| {
+            let (shape, table) = gather.as_ref().expect("hooks only with a gather table");
+            let dc = DiscCtx::new(ctx.src, shape, table, (w, h), coverage_radius);
+            let padded = disc::pass_coverage(&dc, share);
+            fold_padded(&ctx.src.source, padded.into_iter().map(T::c).collect(), w * h)
+        };
+        let hooks = SoftDiscHooks {
+            sums: &sums,
+            pass_coverage: &pass_coverage,
+        };
         backward_with(
             &self.stack,
             settings,
@@ -132,6 +160,7 @@ impl<T: Real> Backward<T> for SpanTape<T> {
                 }
                 _ => pass_sources(ctx),
             },
+            gather.as_ref().map(|_| &hooks),
         )
     }
 }
