@@ -11,7 +11,9 @@
 //! scatter: on a receiver row whose band-layer the forward rendered as spans, the disc row's
 //! interior (where the forward took `S = 1`) is read from row prefix sums of the receivers'
 //! `gC` and `gW` (a difference of two prefix values per component; `S' = 0` there, as in
-//! the forward), the ring tap by tap with the exact `S` and `S'`, and the receivers whose
+//! the forward), the ring (the forward's, to `r + u_out`) in the fast adjoint's 8-lane runs
+//! with the exact `S` and `S'`, receivers with a small recorded weight (`W < 1e-2`) out to
+//! `r + 6` tap by tap, and the receivers whose
 //! occlusion term is evaluated (`e(x) >= 1e-9`) get the exact `O` as a correction on top of
 //! `O = 1`, one by one (a prefix count per row finds them). Rows whose band-layer took the
 //! tap path are summed over every tap within the fast adjoint's reach (`r + 6`), as the
@@ -37,7 +39,16 @@
 //! whose `B` differs between the two records (measured: up to 0.12 where `W ~ 1e-12`);
 //! not yet explained. So for the soft disc the tape records the sums with the fast
 //! forward (an extra forward pass; the output stays the span render); the box coverage
-//! (preset `paper`) uses the span forward's.
+//! (preset `paper`) uses the span forward's. The soft disc's own sums and its pass C are
+//! spans ([`disc`]: O(r) per receiver).
+//!
+//! **Speed** (`drbokeh vjp`, whole process, demo scene, f32, 2 shared cores, load 8-13,
+//! CPU seconds of one run each, span adjoint / fast adjoint): 512 px K 30 paper 3.7 / 5.6,
+//! physical 15.5 / 18.2; 512 px K 60 paper 10.0 / 14.0, physical 38.0 / 49.9; 1 MP K 30
+//! paper 14.8 / 24.5, physical 65.3 / 72.2; 1 MP K 60 paper 27.6 / 51.9. The span render
+//! takes 0.5-4.3 s of CPU on the same workloads, so the backward is still 5-30x its forward
+//! (issue 18's target is 3x): physical spends its time in the second (fast) forward and
+//! the soft disc's rings.
 //!
 //! The recorded sums are the forward's (`C`, `W` within `2e-5` relative, see
 //! `spans/mod.rs`), so the chain rule's upstream factors carry the forward's error too; the
@@ -48,14 +59,13 @@ mod sources;
 
 use super::geometry::{GaugeTable, Shape};
 use super::{render_recording, Choice};
-use crate::engine::fast;
 use crate::engine::backward::fold_padded;
+use crate::engine::fast;
 use crate::engine::fast::adjoint::{
     backward_with, pass_sources, Ctx, SoftDiscHooks, REFINE_WEIGHT_BELOW,
 };
-use crate::engine::planes::Planes;
-use disc::DiscCtx;
 use crate::engine::fast::tiles::WindowTables;
+use crate::engine::planes::Planes;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
 use crate::model::{Coverage, LayerAtPixel};
@@ -63,6 +73,7 @@ use crate::presets::RenderSettings;
 use crate::progress::{NoProgress, Progress};
 use crate::stack::LayerStack;
 use crate::{Real, Result};
+use disc::DiscCtx;
 
 /// The span schedule's tape: the inputs, per layer and pixel the sums the span forward
 /// composited, and per layer and row the forward's choice of spans or taps.
@@ -142,7 +153,11 @@ impl<T: Real> Backward<T> for SpanTape<T> {
             let (shape, table) = gather.as_ref().expect("hooks only with a gather table");
             let dc = DiscCtx::new(ctx.src, shape, table, (w, h), coverage_radius);
             let padded = disc::pass_coverage(&dc, share);
-            fold_padded(&ctx.src.source, padded.into_iter().map(T::c).collect(), w * h)
+            fold_padded(
+                &ctx.src.source,
+                padded.into_iter().map(T::c).collect(),
+                w * h,
+            )
         };
         let hooks = SoftDiscHooks {
             sums: &sums,

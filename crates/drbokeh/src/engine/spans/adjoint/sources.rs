@@ -94,7 +94,13 @@ struct RowData {
 impl RowData {
     /// Whether a receiver in image columns `x0 ..= x1`, rows `y0 ..= y1` (clipped) has a
     /// non-zero upstream gradient.
-    fn any_nonzero(&self, w: usize, h: usize, (x0, x1): (isize, isize), (y0, y1): (isize, isize)) -> bool {
+    fn any_nonzero(
+        &self,
+        w: usize,
+        h: usize,
+        (x0, x1): (isize, isize),
+        (y0, y1): (isize, isize),
+    ) -> bool {
         let (x0, x1) = (x0.max(0) as usize, (x1 + 1).clamp(0, w as isize) as usize);
         let (y0, y1) = (y0.max(0) as usize, (y1 + 1).clamp(0, h as isize) as usize);
         if x0 >= x1 || y0 >= y1 {
@@ -292,8 +298,7 @@ fn add_tap<T: Real>(
         acc[c] = acc[c] + g[c] * so;
     }
     acc[3] = acc[3] + gc * so;
-    acc[4] =
-        acc[4] + gc * o * model::normalised_scatter_radius_factor(s, sd, src.terms.dlog_area);
+    acc[4] = acc[4] + gc * o * model::normalised_scatter_radius_factor(s, sd, src.terms.dlog_area);
     acc[5] = acc[5] + gc * s * d_o;
 }
 
