@@ -254,9 +254,16 @@ pub(in crate::engine) fn backward_with<T: Real>(
 /// Another schedule's soft-disc coverage (the span adjoint's): every receiver's sums
 /// with derivatives from a layer's padded planes, and pass C (per image pixel, folded).
 pub(in crate::engine) struct SoftDiscHooks<'a, T> {
-    pub sums: &'a (dyn Fn(&Planes<T>) -> Vec<DiscCoverage<T>> + Sync),
-    pub pass_coverage: &'a (dyn Fn(&Ctx<'_, T>, &[T]) -> Vec<T> + Sync),
+    pub sums: &'a DiscSumsFn<'a, T>,
+    pub pass_coverage: &'a PassCoverageFn<'a, T>,
 }
+
+/// Every receiver's soft-disc sums with derivatives from a layer's padded planes.
+pub(in crate::engine) type DiscSumsFn<'a, T> =
+    dyn Fn(&Planes<T>) -> Vec<DiscCoverage<T>> + Sync + 'a;
+
+/// Pass C of the soft disc: per image pixel, from `dL/do / Z` per receiver.
+pub(in crate::engine) type PassCoverageFn<'a, T> = dyn Fn(&Ctx<'_, T>, &[T]) -> Vec<T> + Sync + 'a;
 
 /// The window tables, every layer's prepared terms and padded planes, and (soft disc)
 /// the coverage with its derivative over the backward's longer reach: its value
@@ -265,7 +272,7 @@ pub(in crate::engine) struct SoftDiscHooks<'a, T> {
 fn prepare<T: Real>(
     stack: &LayerStack<T>,
     settings: &RenderSettings,
-    disc_sums_with: Option<&(dyn Fn(&Planes<T>) -> Vec<DiscCoverage<T>> + Sync)>,
+    disc_sums_with: Option<&DiscSumsFn<'_, T>>,
 ) -> State<T> {
     let options = settings.model();
     let (w, h) = (stack.width, stack.height);
