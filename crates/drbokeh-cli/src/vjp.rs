@@ -16,10 +16,12 @@ use std::path::PathBuf;
 /// into layers exactly as `render` does for the same focus and blur (one opaque layer
 /// with --single-layer), and N is that stack's layer count.
 ///
-/// --engine auto (the default) runs forward and backward on the fast engine in f32 (only the
-/// taps that can contribute; within 1e-5 of the exact gradient's largest value, tested) and
-/// on the threaded engine with --f64 (the exact gradient, every window tap); fast, threaded
-/// and reference choose explicitly (reference runs the threaded adjoint).
+/// --engine auto (the default) runs forward and backward on the span engine in f32 (row
+/// spans where they are cheaper, the fast engine's taps elsewhere; within 1e-3 of the exact
+/// gradient's largest value, tested) and on the threaded engine with --f64 (the exact
+/// gradient, every window tap); spans, fast, threaded and reference choose explicitly
+/// (fast: only the taps that can contribute, within 1e-5; reference runs the threaded
+/// adjoint).
 ///
 /// Examples (the first writes a render to use as G):
 ///   drbokeh render --demo --demo-size 160x107 -o g.npy

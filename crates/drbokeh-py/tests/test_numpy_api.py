@@ -41,7 +41,7 @@ def test_auto_engine_is_fast_in_f32_and_exact_in_f64():
     np.testing.assert_array_equal(drbokeh.render(**s64, **CAM), exact)
     np.testing.assert_array_equal(drbokeh.render(**s64, **CAM, engine="threaded"), exact)
     assert drbokeh.render_with_tape(**s64, **CAM)[1].engine == "threaded"
-    assert drbokeh.render_with_tape(**s32, **CAM)[1].engine == "fast"
+    assert drbokeh.render_with_tape(**s32, **CAM)[1].engine == "spans"
     # The fast engine agrees with the exact one (the library's tested bound).
     assert np.abs(drbokeh.render(**s32, **CAM) - exact).max() < 1e-4
 

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{random_stack, settings, tape_bits};
+use common::{random_stack, settings};
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
     render, render_with_stats, Aperture, Engine, Image, Layer, LayerStack, NoProgress,
@@ -249,24 +249,4 @@ fn auto_matches_fast() {
             );
         }
     }
-}
-
-/// The span engine's tape is the fast adjoint's (an exact-within-1e-5 adjoint, tested
-/// against the threaded one in `tests/fast_adjoint.rs`): the same output and gradients.
-#[test]
-fn spans_tape_is_the_fast_adjoint() {
-    let stack = random_stack::<f32>(23, 31, 27, 2);
-    let s = settings(0.5, 15.0, 31, Aperture::Circle).with_model(ModelOptions::PHYSICAL);
-    let g = Image::from_vec(
-        31,
-        27,
-        3,
-        (0..31 * 27 * 3)
-            .map(|i| ((i * 7919) % 13) as f32 / 6.0 - 1.0)
-            .collect(),
-    )
-    .unwrap();
-    let run = |engine| tape_bits(&stack, &s, engine, &g);
-    let fast = run(Engine::Fast);
-    assert!(fast == run(Engine::Spans) && fast == run(Engine::Auto));
 }

@@ -40,8 +40,9 @@ impl<T: Real> Tape<T> {
         &self.settings
     }
 
-    /// The schedule the backward pass runs on: [`Engine::Threaded`] (exact) or
-    /// [`Engine::Fast`].
+    /// The schedule the backward pass runs on: [`Engine::Threaded`] (exact),
+    /// [`Engine::Fast`], or [`Engine::Spans`] / [`Engine::Auto`] (the span adjoint, spans or
+    /// taps per band-layer as the forward chose).
     pub fn engine(&self) -> Engine {
         self.engine
     }

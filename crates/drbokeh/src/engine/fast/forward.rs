@@ -165,8 +165,9 @@ impl AlphaSat {
 }
 
 /// One layer over one band on the fast schedule (the span engine's tap path): gathers it
-/// and composites it into `linear` and `transmittance` (front to back). Returns the taps
-/// visited.
+/// and composites it into `linear` and `transmittance` (front to back); with a non-empty
+/// `saved`, also records the layer's sums out to the adjoint's reach (as the fast tape).
+/// Returns the taps visited.
 #[allow(clippy::too_many_arguments)]
 pub(in crate::engine) fn band_layer_taps<T: Real>(
     b: &Planes<T>,
@@ -176,6 +177,7 @@ pub(in crate::engine) fn band_layer_taps<T: Real>(
     size: (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [LayerAtPixel<T>],
 ) -> u64 {
     render_band_layer_dispatch(
         b,
@@ -185,7 +187,7 @@ pub(in crate::engine) fn band_layer_taps<T: Real>(
         size,
         linear,
         transmittance,
-        &mut [],
+        saved,
     )
 }
 

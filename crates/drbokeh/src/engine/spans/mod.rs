@@ -41,6 +41,7 @@
 //! disparities spread over more than about `0.35`, at small K), the band-layer takes the
 //! tap path.
 
+pub(super) mod adjoint;
 mod choice;
 mod coverage;
 mod focus;
@@ -53,7 +54,7 @@ use crate::engine::fast::forward::{band_layer_taps, AlphaSat};
 use crate::engine::fast::tiles::{WindowTables, BAND_ROWS};
 use crate::engine::planes::Planes;
 use crate::image::Image;
-use crate::model::{ApertureEval, Coverage, PixelModel};
+use crate::model::{ApertureEval, Coverage, LayerAtPixel, PixelModel};
 use crate::presets::RenderSettings;
 use crate::progress::Progress;
 use crate::stack::LayerStack;
@@ -84,6 +85,28 @@ pub(crate) fn render<T: Real>(
     progress: &dyn Progress,
     choice: Choice,
 ) -> (Image<T>, SpanStats) {
+    let (img, stats, _) = render_recording(stack, settings, progress, choice, false);
+    (img, stats)
+}
+
+/// What the span adjoint needs from the forward pass ([`render_recording`]).
+pub(crate) struct SpanRecording<T> {
+    /// Per layer, per pixel: `W`, `B` and `o` as the composite used them (the tap path's
+    /// band-layers: out to the fast adjoint's reach, as the fast tape records them).
+    pub saved: Vec<Vec<LayerAtPixel<T>>>,
+    /// Per layer, per image row: whether the row's band-layer took the span path.
+    pub span_rows: Vec<Vec<bool>>,
+}
+
+/// [`render`], and with `record` the sums and per-row choices the adjoint needs (the
+/// same bytes either way).
+pub(crate) fn render_recording<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    choice: Choice,
+    record: bool,
+) -> (Image<T>, SpanStats, Option<SpanRecording<T>>) {
     let (w, h) = (stack.width, stack.height);
     let tables = WindowTables::<T>::new(settings);
     let big_r = tables.big_r;
@@ -99,7 +122,8 @@ pub(crate) fn render<T: Real>(
     let gather_table = (shape.is_some() && options.coverage == Coverage::SoftDisc)
         .then(|| GaugeTable::<T>::new(&settings.aperture, big_r, 1));
     let mut out = Image::new(w, h, 3);
-    let stats: Vec<SpanStats> = out
+    type BandRecord<T> = (Vec<Vec<LayerAtPixel<T>>>, Vec<bool>);
+    let bands: Vec<(SpanStats, BandRecord<T>)> = out
         .data
         .par_chunks_mut(3 * w * band_rows)
         .enumerate()
@@ -110,7 +134,14 @@ pub(crate) fn render<T: Real>(
             let mut stats = SpanStats::default();
             let mut linear = vec![[T::zero(); 3]; rows * w];
             let mut transmittance = vec![T::one(); rows * w];
+            let mut record_saved = Vec::new();
+            let mut record_spans = Vec::new();
             for layer in &stack.layers {
+                let mut saved = if record {
+                    vec![LayerAtPixel::default(); rows * w]
+                } else {
+                    Vec::new()
+                };
                 let b = Planes::band(layer, &pixel, options.step, (y0, y1), big_r);
                 let plan = match (&shape, &scatter_table) {
                     (Some(shape), Some(table)) => {
@@ -134,7 +165,10 @@ pub(crate) fn render<T: Real>(
                         (rows, w),
                         &mut linear,
                         &mut transmittance,
+                        &mut saved,
                     );
+                    record_saved.push(saved);
+                    record_spans.push(false);
                     continue;
                 };
                 stats.span_layers += 1;
@@ -169,8 +203,15 @@ pub(crate) fn render<T: Real>(
                 {
                     let sy0 = s * SUB_ROWS;
                     let sy1 = (sy0 + SUB_ROWS).min(ctx.rows);
-                    stats.span_work += scatter::render_sub_band(&ctx, (sy0, sy1), lin, tr);
+                    let sv = if record {
+                        &mut saved[sy0 * w..sy1 * w]
+                    } else {
+                        &mut []
+                    };
+                    stats.span_work += scatter::render_sub_band(&ctx, (sy0, sy1), lin, tr, sv);
                 }
+                record_saved.push(saved);
+                record_spans.push(true);
             }
             for (i, lin) in linear.iter().enumerate() {
                 for c in 0..3 {
@@ -178,16 +219,34 @@ pub(crate) fn render<T: Real>(
                 }
             }
             progress.advance(rows as u64);
-            stats
+            (stats, (record_saved, record_spans))
         })
         .collect();
-    let total = stats.iter().fold(SpanStats::default(), |a, s| SpanStats {
-        taps: a.taps + s.taps,
-        span_work: a.span_work + s.span_work,
-        span_layers: a.span_layers + s.span_layers,
-        tap_layers: a.tap_layers + s.tap_layers,
+    let total = bands
+        .iter()
+        .map(|b| &b.0)
+        .fold(SpanStats::default(), |a, s| SpanStats {
+            taps: a.taps + s.taps,
+            span_work: a.span_work + s.span_work,
+            span_layers: a.span_layers + s.span_layers,
+            tap_layers: a.tap_layers + s.tap_layers,
+        });
+    let recording = record.then(|| {
+        let n = stack.layers.len();
+        let mut rec = SpanRecording {
+            saved: (0..n).map(|_| Vec::with_capacity(w * h)).collect(),
+            span_rows: (0..n).map(|_| Vec::with_capacity(h)).collect(),
+        };
+        for (band, (_, (saved, spans))) in bands.into_iter().enumerate() {
+            let rows = (h - band * band_rows).min(band_rows);
+            for (l, (s, span)) in saved.into_iter().zip(spans).enumerate() {
+                rec.saved[l].extend(s);
+                rec.span_rows[l].extend(std::iter::repeat(span).take(rows));
+            }
+        }
+        rec
     });
-    (out, total)
+    (out, total, recording)
 }
 
 /// The interpolation points for the band's in-focus receivers: `Ok(None)` if there are

@@ -15,7 +15,7 @@ use super::geometry::{
 };
 use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
-use crate::model::{self, ScatterStep};
+use crate::model::{self, LayerAtPixel, ScatterStep};
 use crate::Real;
 
 /// Receiver rows per sub-band (one task, one set of accumulators).
@@ -121,20 +121,23 @@ avx2_dispatch!(
         ctx: &BandLayer<'_, T>,
         rows: (usize, usize),
         linear: &mut [[T; 3]],
-        transmittance: &mut [T]
+        transmittance: &mut [T],
+        saved: &mut [LayerAtPixel<T>]
     ) -> u64
 );
 
 /// Renders one layer over receiver rows `y0 .. y1` of the band and composites it into
 /// `linear` and `transmittance` (those rows only). Returns the ring taps and span writes
-/// made (the work done).
+/// made (the work done). With a non-empty `saved` (those rows), also records each
+/// receiver's `W`, `B` and `o` for the adjoint (the values the composite used).
 pub(super) fn render_sub_band<T: Real>(
     ctx: &BandLayer<'_, T>,
     rows: (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [LayerAtPixel<T>],
 ) -> u64 {
-    sub_band_dispatch(ctx, rows, linear, transmittance)
+    sub_band_dispatch(ctx, rows, linear, transmittance, saved)
 }
 
 #[inline(always)]
@@ -143,6 +146,7 @@ fn sub_band<T: Real>(
     (y0, y1): (usize, usize),
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [LayerAtPixel<T>],
 ) -> u64 {
     let mut acc = new_acc(ctx, (y0, y1));
     let focus = acc.focus.iter().any(Option::is_some);
@@ -153,7 +157,7 @@ fn sub_band<T: Real>(
         (ScatterStep::Paper, false) => scatter_sources::<T, false, false>(ctx, rows, &mut acc),
         (ScatterStep::Paper, true) => scatter_sources::<T, false, true>(ctx, rows, &mut acc),
     };
-    let cover = finish::<T>(ctx, (y0, y1), &acc, linear, transmittance);
+    let cover = finish::<T>(ctx, (y0, y1), &acc, linear, transmittance, saved);
     work + cover
 }
 
@@ -723,13 +727,14 @@ fn ring_add<T: Real, const FOCUS: bool>(
 }
 
 /// Prefix sums, layer colour, coverage and compositing of rows `y0 .. y1`. Returns the
-/// coverage's work.
+/// coverage's work. Records `W`, `B`, `o` into a non-empty `saved`.
 fn finish<T: Real>(
     ctx: &BandLayer<'_, T>,
     (y0, y1): (usize, usize),
     acc: &Acc<T>,
     linear: &mut [[T; 3]],
     transmittance: &mut [T],
+    saved: &mut [LayerAtPixel<T>],
 ) -> u64 {
     let (w, b) = (ctx.width, ctx.b);
     let eps = T::c(model::WEIGHT_EPSILON);
@@ -773,6 +778,13 @@ fn finish<T: Real>(
                 *lin = *lin + sums[c] * inv * coverage * t;
             }
             transmittance[o - y0 * w] = t * (T::one() - coverage);
+            if let Some(s) = saved.get_mut(o - y0 * w) {
+                *s = LayerAtPixel {
+                    weight: sums[3],
+                    colour: [0, 1, 2].map(|c| sums[c] * inv),
+                    coverage,
+                };
+            }
         }
     }
     work

@@ -9,7 +9,7 @@ use crate::presets::RenderSettings;
 use crate::Real;
 
 /// Shared read-only state of the passes over one layer.
-pub(super) struct Ctx<'a, T> {
+pub(in crate::engine) struct Ctx<'a, T> {
     pub settings: &'a RenderSettings,
     pub tables: &'a WindowTables<T>,
     /// `gauge_flip[ddy + R][ddx + R]`: the gauge of the tap from source y to receiver
@@ -24,7 +24,7 @@ pub(super) struct Ctx<'a, T> {
 }
 
 /// One layer's receiver terms and upstream gradients, image-sized.
-pub(super) struct Receivers<T> {
+pub(in crate::engine) struct Receivers<T> {
     pub width: usize,
     pub height: usize,
     /// `dL/dC(x)` per channel and `dL/dW(x)`.

@@ -70,6 +70,8 @@ mod coverage;
 mod receivers;
 mod refine;
 mod sources;
+pub(in crate::engine) use refine::REFINE_WEIGHT_BELOW;
+pub(in crate::engine) use sources::{pass_sources, source_run, SourceTerms};
 
 use crate::engine::backward::{self, LayerPartials};
 use crate::engine::fast::forward::render_recording;
@@ -83,7 +85,8 @@ use crate::presets::RenderSettings;
 use crate::progress::Progress;
 use crate::stack::LayerStack;
 use crate::{Real, Result};
-use context::{Ctx, Receivers};
+pub(in crate::engine) use context::Ctx;
+use context::Receivers;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -93,7 +96,7 @@ pub(crate) struct FastTape<T> {
     settings: RenderSettings,
     stack: LayerStack<T>,
     /// Per layer, per pixel (sums out to the backward's reach).
-    saved: Vec<Vec<LayerAtPixel<T>>>,
+    pub(in crate::engine) saved: Vec<Vec<LayerAtPixel<T>>>,
 }
 
 /// Renders with the fast engine (identical bytes to `render(.., Engine::Fast, ..)`) and
@@ -130,157 +133,202 @@ impl<T: Real> Backward<T> for FastTape<T> {
     /// Back-propagates `grad_output` on the fast schedule. Deterministic for any thread
     /// count: every output element is computed by one task, in a fixed order.
     fn backward(&self, grad_output: &Image<T>, progress: &dyn Progress) -> Result<Gradients<T>> {
-        let (w, h) = (self.stack.width, self.stack.height);
-        let n_layers = self.stack.layers.len();
-        let settings = &self.settings;
-        let options = settings.model();
-        let k = T::c(settings.camera.blur_k);
-        backward::run(
+        backward_with(
             &self.stack,
-            settings,
+            &self.settings,
+            &self.saved,
             grad_output,
             progress,
-            || self.prepare(),
-            |state| {
-                // The soft disc's recomputed coverage replaces the recorded one.
-                let saved: Vec<Vec<LayerAtPixel<T>>> = self
-                    .saved
-                    .iter()
-                    .zip(&state.discs)
-                    .map(|(saved, discs)| {
-                        let mut saved = saved.clone();
-                        for (s, d) in saved.iter_mut().zip(discs) {
-                            s.coverage = d.value();
-                        }
-                        saved
-                    })
-                    .collect();
-                // Receivers whose weight sum is of the order of the dropped tail: their
-                // layer colour B = C / (W + 1e-8) is set by the tail (the output hides it,
-                // o(x) ~ 0 there, but dL/do does not), so C and W are summed again over
-                // the whole window.
-                let saved: Vec<Vec<LayerAtPixel<T>>> = saved
-                    .iter()
-                    .zip(&state.sources)
-                    .map(|(saved, src)| {
-                        refine::refine_small_weights(
-                            saved,
-                            src,
-                            &state.tables,
-                            &state.aperture,
-                            settings,
-                        )
-                    })
-                    .collect();
-                // The composite of the refined sums: the display transfer's derivative is
-                // steep for dark pixels, and evaluating it at the rendered value would pass
-                // the render's own tail error (<= 1e-5) on to every gradient through the
-                // transfer's curvature.
-                let linear: Vec<[T; 3]> = (0..w * h)
-                    .into_par_iter()
-                    .map(|i| {
-                        model::composite(
-                            (0..n_layers).map(|l| (saved[l][i].colour, saved[l][i].coverage)),
-                        )
-                    })
-                    .collect();
-                (move |i: usize, l: usize| saved[l][i], Cow::Owned(linear))
-            },
-            |state, l, rg, progress| {
-                let rcv = Receivers::new(&state.prepared[l], rg);
-                let ctx = Ctx {
-                    settings,
-                    tables: &state.tables,
-                    gauge_flip: &state.gauge_flip,
-                    aperture: &state.aperture,
-                    src: &state.sources[l],
-                    rcv: &rcv,
-                    discs: &state.discs[l],
-                    k,
-                };
-                let (g_disp_receiver, share, k_a) = receivers::pass_receivers(&ctx);
-                progress.advance(1);
-                let (g_lin, g_alpha_scatter, g_disp_source, k_b) = sources::pass_sources(&ctx);
-                progress.advance(1);
-                let g_alpha_coverage = match options.coverage {
-                    Coverage::PaperBox => coverage::pass_coverage_box(&ctx),
-                    Coverage::SoftDisc => coverage::pass_coverage_disc(&ctx, &share),
-                };
-                progress.advance(1);
-                LayerPartials {
-                    g_lin,
-                    g_alpha_scatter,
-                    g_alpha_coverage,
-                    g_disp_receiver,
-                    g_disp_source,
-                    blur_k: (k_a, k_b),
-                }
-            },
+            |ctx, _| sources::pass_sources(ctx),
+            None,
         )
     }
 }
 
-impl<T: Real> FastTape<T> {
-    /// The window tables, every layer's prepared terms and padded planes, and (soft disc)
-    /// the coverage with its derivative over the backward's longer reach: its value
-    /// replaces the recorded one (whose shorter tail weighs up to 1.5e-5 of Z at
-    /// r_c ~ 0), so that o and do/dr come from the same sums.
-    fn prepare(&self) -> State<T> {
-        let settings = &self.settings;
-        let options = settings.model();
-        let (w, h) = (self.stack.width, self.stack.height);
-        let tables = WindowTables::<T>::new(settings);
-        let big_r = tables.big_r;
-        let aperture = ApertureEval::<T>::new(&settings.aperture);
-        let prepared: Vec<PreparedLayer<T>> = self
-            .stack
-            .layers
-            .iter()
-            .map(|l| model::prepare_layer(l, &settings.camera, &options))
-            .collect();
-        let sources: Vec<Planes<T>> = prepared
-            .iter()
-            .map(|p| Planes::padded(p, big_r, options.step))
-            .collect();
-        let footprint = T::c(options.footprint.px());
-        let discs: Vec<Vec<DiscCoverage<T>>> = sources
-            .iter()
-            .map(|src| {
-                if options.coverage != Coverage::SoftDisc {
-                    return Vec::new();
-                }
-                (0..w * h)
-                    .into_par_iter()
-                    .map(|i| {
-                        let xi = src.index(i % w, i / w);
-                        let r_c = model::coverage_radius_px(
-                            src.radius[xi],
-                            options.coverage_radius,
-                            footprint,
-                        );
-                        let reach = backward_reach(&aperture, r_c.0.f64());
-                        disc_sums::<T, true>(
-                            src,
-                            &tables,
-                            &aperture,
-                            xi,
-                            r_c,
-                            reach,
-                            LaneReduction::Total,
-                        )
-                        .0
-                    })
-                    .collect()
-            })
-            .collect();
-        let gauge_flip = tables.flipped_gauge();
-        State {
-            tables,
-            gauge_flip,
-            aperture,
-            prepared,
-            sources,
-            discs,
-        }
+/// The gradients of pass B over one layer: per image pixel `dL/dIlin`, `dL/da` (scatter
+/// part), `dL/dd` (source part), and K's total.
+pub(in crate::engine) type SourceGradients<T> = (Vec<[T; 3]>, Vec<T>, Vec<T>, f64);
+
+/// The fast adjoint's backward around a pass B of the caller's choice
+/// (`pass_sources(ctx, layer)`): the fast schedule's own ([`sources::pass_sources`]) or
+/// the span engine's. `saved` holds per layer and pixel the sums the forward composited.
+pub(in crate::engine) fn backward_with<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    saved: &[Vec<LayerAtPixel<T>>],
+    grad_output: &Image<T>,
+    progress: &dyn Progress,
+    pass_sources: impl Fn(&Ctx<'_, T>, usize) -> SourceGradients<T>,
+    soft_disc: Option<&SoftDiscHooks<'_, T>>,
+) -> Result<Gradients<T>> {
+    let (w, h) = (stack.width, stack.height);
+    let n_layers = stack.layers.len();
+    let options = settings.model();
+    let k = T::c(settings.camera.blur_k);
+    backward::run(
+        stack,
+        settings,
+        grad_output,
+        progress,
+        || prepare(stack, settings, soft_disc.map(|h| h.sums)),
+        |state| {
+            // The soft disc's recomputed coverage replaces the recorded one.
+            let saved: Vec<Vec<LayerAtPixel<T>>> = saved
+                .iter()
+                .zip(&state.discs)
+                .map(|(saved, discs)| {
+                    let mut saved = saved.clone();
+                    for (s, d) in saved.iter_mut().zip(discs) {
+                        s.coverage = d.value();
+                    }
+                    saved
+                })
+                .collect();
+            // Receivers whose weight sum is of the order of the dropped tail: their
+            // layer colour B = C / (W + 1e-8) is set by the tail (the output hides it,
+            // o(x) ~ 0 there, but dL/do does not), so C and W are summed again over
+            // the whole window.
+            let saved: Vec<Vec<LayerAtPixel<T>>> = saved
+                .iter()
+                .zip(&state.sources)
+                .map(|(saved, src)| {
+                    refine::refine_small_weights(
+                        saved,
+                        src,
+                        &state.tables,
+                        &state.aperture,
+                        settings,
+                    )
+                })
+                .collect();
+            // The composite of the refined sums: the display transfer's derivative is
+            // steep for dark pixels, and evaluating it at the rendered value would pass
+            // the render's own tail error (<= 1e-5) on to every gradient through the
+            // transfer's curvature.
+            let linear: Vec<[T; 3]> = (0..w * h)
+                .into_par_iter()
+                .map(|i| {
+                    model::composite(
+                        (0..n_layers).map(|l| (saved[l][i].colour, saved[l][i].coverage)),
+                    )
+                })
+                .collect();
+            (move |i: usize, l: usize| saved[l][i], Cow::Owned(linear))
+        },
+        |state, l, rg, progress| {
+            let rcv = Receivers::new(&state.prepared[l], rg);
+            let ctx = Ctx {
+                settings,
+                tables: &state.tables,
+                gauge_flip: &state.gauge_flip,
+                aperture: &state.aperture,
+                src: &state.sources[l],
+                rcv: &rcv,
+                discs: &state.discs[l],
+                k,
+            };
+            let (g_disp_receiver, share, k_a) = receivers::pass_receivers(&ctx);
+            progress.advance(1);
+            let (g_lin, g_alpha_scatter, g_disp_source, k_b) = pass_sources(&ctx, l);
+            progress.advance(1);
+            let g_alpha_coverage = match options.coverage {
+                Coverage::PaperBox => coverage::pass_coverage_box(&ctx),
+                Coverage::SoftDisc => match soft_disc {
+                    Some(h) => (h.pass_coverage)(&ctx, &share),
+                    None => coverage::pass_coverage_disc(&ctx, &share),
+                },
+            };
+            progress.advance(1);
+            LayerPartials {
+                g_lin,
+                g_alpha_scatter,
+                g_alpha_coverage,
+                g_disp_receiver,
+                g_disp_source,
+                blur_k: (k_a, k_b),
+            }
+        },
+    )
+}
+
+/// Another schedule's soft-disc coverage (the span adjoint's): every receiver's sums
+/// with derivatives from a layer's padded planes, and pass C (per image pixel, folded).
+pub(in crate::engine) struct SoftDiscHooks<'a, T> {
+    pub sums: &'a DiscSumsFn<'a, T>,
+    pub pass_coverage: &'a PassCoverageFn<'a, T>,
+}
+
+/// Every receiver's soft-disc sums with derivatives from a layer's padded planes.
+pub(in crate::engine) type DiscSumsFn<'a, T> =
+    dyn Fn(&Planes<T>) -> Vec<DiscCoverage<T>> + Sync + 'a;
+
+/// Pass C of the soft disc: per image pixel, from `dL/do / Z` per receiver.
+pub(in crate::engine) type PassCoverageFn<'a, T> = dyn Fn(&Ctx<'_, T>, &[T]) -> Vec<T> + Sync + 'a;
+
+/// The window tables, every layer's prepared terms and padded planes, and (soft disc)
+/// the coverage with its derivative over the backward's longer reach: its value
+/// replaces the recorded one (whose shorter tail weighs up to 1.5e-5 of Z at
+/// r_c ~ 0), so that o and do/dr come from the same sums.
+fn prepare<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    disc_sums_with: Option<&DiscSumsFn<'_, T>>,
+) -> State<T> {
+    let options = settings.model();
+    let (w, h) = (stack.width, stack.height);
+    let tables = WindowTables::<T>::new(settings);
+    let big_r = tables.big_r;
+    let aperture = ApertureEval::<T>::new(&settings.aperture);
+    let prepared: Vec<PreparedLayer<T>> = stack
+        .layers
+        .iter()
+        .map(|l| model::prepare_layer(l, &settings.camera, &options))
+        .collect();
+    let sources: Vec<Planes<T>> = prepared
+        .iter()
+        .map(|p| Planes::padded(p, big_r, options.step))
+        .collect();
+    let footprint = T::c(options.footprint.px());
+    let discs: Vec<Vec<DiscCoverage<T>>> = sources
+        .iter()
+        .map(|src| {
+            if options.coverage != Coverage::SoftDisc {
+                return Vec::new();
+            }
+            if let Some(f) = disc_sums_with {
+                return f(src);
+            }
+            (0..w * h)
+                .into_par_iter()
+                .map(|i| {
+                    let xi = src.index(i % w, i / w);
+                    let r_c = model::coverage_radius_px(
+                        src.radius[xi],
+                        options.coverage_radius,
+                        footprint,
+                    );
+                    let reach = backward_reach(&aperture, r_c.0.f64());
+                    disc_sums::<T, true>(
+                        src,
+                        &tables,
+                        &aperture,
+                        xi,
+                        r_c,
+                        reach,
+                        LaneReduction::Total,
+                    )
+                    .0
+                })
+                .collect()
+        })
+        .collect();
+    let gauge_flip = tables.flipped_gauge();
+    State {
+        tables,
+        gauge_flip,
+        aperture,
+        prepared,
+        sources,
+        discs,
     }
 }

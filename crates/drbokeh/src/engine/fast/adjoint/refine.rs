@@ -13,7 +13,7 @@ use rayon::prelude::*;
 /// unit alpha (`model::SCATTER_TAIL_PX`), so above this B is within 6e-4 of the exact
 /// value even in the worst case (measured: ~1e-8 on the test scenes), and below it the
 /// exact sums are cheap enough: such receivers lie in a layer's (nearly) empty regions.
-pub(super) const REFINE_WEIGHT_BELOW: f64 = 1e-2;
+pub(in crate::engine) const REFINE_WEIGHT_BELOW: f64 = 1e-2;
 
 /// The recorded sums of one layer, with `W` and `B` recomputed over every window tap
 /// (no reach bound) where `W < REFINE_WEIGHT_BELOW` and some source with alpha > 0 lies in

@@ -16,7 +16,9 @@ use rayon::prelude::*;
 /// Gradients per image pixel: linear colour, alpha (scatter part), disparity (source
 /// part), and K's total.
 #[allow(clippy::type_complexity)]
-pub(super) fn pass_sources<T: Real>(ctx: &Ctx<'_, T>) -> (Vec<[T; 3]>, Vec<T>, Vec<T>, f64) {
+pub(in crate::engine) fn pass_sources<T: Real>(
+    ctx: &Ctx<'_, T>,
+) -> (Vec<[T; 3]>, Vec<T>, Vec<T>, f64) {
     let src = ctx.src;
     let occluding = occluding_table(ctx);
     let tiles: Vec<(Vec<[T; 5]>, f64)> = (0..src.rows)
@@ -84,13 +86,13 @@ avx2_dispatch!(
 
 /// Source terms of one padded pixel, for [`source_run`].
 #[derive(Clone, Copy)]
-struct SourceTerms<T> {
-    step: ScatterStep,
-    radius: T,
+pub(in crate::engine) struct SourceTerms<T> {
+    pub step: ScatterStep,
+    pub radius: T,
     /// `A'(r) / A(r)` of the source area ([`model::source_area`]): `2 / r` for the paper.
-    dlog_area: T,
-    rel_disp: T,
-    lin: [T; 3],
+    pub dlog_area: T,
+    pub rel_disp: T,
+    pub lin: [T; 3],
 }
 
 /// Pass B over the padded source rows `y0 .. y0 + TILE_ROWS`, tile by tile. Returns per
@@ -251,9 +253,10 @@ fn source_row_run<T: Real>(
 /// Pass B's run over receivers `i0 .. i0 + gauge.len()` (image indices of one row) for one
 /// source: `[sum gC S O (3), sum gc S O, sum gc O (S' - S A'/A), sum gc S dO/dd_y]` with
 /// `gc = dL/dC . Ilin(y) + dL/dW`. `OCC = false`: every receiver has `O = 1`. `FULL =
-/// false` (alpha = 0): only the alpha gradient's sum is needed.
+/// false` (alpha = 0): only the alpha gradient's sum is needed. Also the span adjoint's
+/// ring runs (`engine/spans/adjoint/sources.rs`).
 #[inline(always)]
-fn source_run<T: Real, const OCC: bool, const FULL: bool>(
+pub(in crate::engine) fn source_run<T: Real, const OCC: bool, const FULL: bool>(
     rcv: &Receivers<T>,
     i0: usize,
     gauge: &[T],

@@ -1,0 +1,484 @@
+//! Pass B of the span adjoint: per padded source, the gradients reaching `Ilin(y)`, `a(y)`,
+//! `d(y)` (through `S`, `A` and `O`) and K (through `r(y)`), summed over its disc row by
+//! row: on span rows the interior from prefix sums of the receivers' upstream gradients,
+//! the ring (the forward's) in 8-lane runs (the fast adjoint's [`source_run`]), the
+//! in-focus receivers of the interior and the tail receivers (below) tap by tap; on tap
+//! rows every tap within the fast adjoint's reach, in runs. The transpose of `scatter.rs`.
+//!
+//! **Tail receivers.** Beyond the forward's ring (`r + u_out`) a tap weighs at most
+//! `1.4e-7` (paper) or `6.8e-8` (sharp) of a unit tap, which matters only where the
+//! receiver's upstream factor `dL/dW ~ o / W` is large: receivers whose recorded weight
+//! sum is below the refinement threshold (`W < 1e-2`, summed over the whole window before
+//! the chain rule, `engine/fast/adjoint/refine.rs`). Those get every tap out to the fast
+//! adjoint's reach `r + 6` (measured without them: 1.8e-2 of the largest alpha gradient at
+//! a layer's edge, preset physical); elsewhere `dL/dW <= |dL/dB| o / 1e-2` and the dropped
+//! tail is at most `1e-5` of a unit tap's gradient per source row.
+//!
+//! **Skipped sources.** A source none of whose reachable receivers (the bounding box of
+//! `r + 6`) has a non-zero `dL/dC` or `dL/dW` has all sums exactly zero (a summed-area
+//! count decides it in O(1)); zero-alpha sources need only `sum gc S O` (their alpha
+//! gradient), the runs' alpha-only variant.
+
+use super::super::geometry::{disc_row, GaugeTable, Rings, Shape, STEP_ARGUMENT_MIN, TABLE_MARGIN};
+use crate::engine::fast::adjoint::{source_run, Ctx, SourceGradients, SourceTerms};
+use crate::engine::simd::avx2_dispatch;
+use crate::model::{self, SCATTER_TAIL_PX};
+use crate::Real;
+use rayon::prelude::*;
+
+/// Components of the receivers' upstream gradient: `dL/dC` (3) and `dL/dW`.
+const COMPONENTS: usize = 4;
+
+/// How far beyond `r` pass B reaches (in gauge units) on tap rows, and for tail receivers
+/// on span rows: the fast adjoint's `r + 4.5 + 1.5` (`engine/fast/tiles.rs`,
+/// `backward_reach`).
+const TAP_ROW_TAIL_PX: f64 = SCATTER_TAIL_PX + 1.5;
+
+/// A sparse set of receivers per image row: prefix counts (`w + 1` per row) and columns.
+struct RowSet {
+    count: Vec<u32>,
+    cols: Vec<u32>,
+    start: Vec<usize>,
+}
+
+impl RowSet {
+    fn new(w: usize, h: usize, member: impl Fn(usize) -> bool) -> Self {
+        let mut count = vec![0u32; h * (w + 1)];
+        let mut cols = Vec::new();
+        let mut start = Vec::with_capacity(h + 1);
+        for y in 0..h {
+            start.push(cols.len());
+            for x in 0..w {
+                let inside = member(y * w + x);
+                count[y * (w + 1) + x + 1] = count[y * (w + 1) + x] + u32::from(inside);
+                if inside {
+                    cols.push(x as u32);
+                }
+            }
+        }
+        start.push(cols.len());
+        RowSet { count, cols, start }
+    }
+
+    /// The members of row `y` in columns `xa ..= xb`.
+    #[inline(always)]
+    fn within(&self, w: usize, y: usize, (xa, xb): (isize, isize)) -> &[u32] {
+        if xa > xb {
+            return &[];
+        }
+        let count = &self.count[y * (w + 1)..];
+        let (ca, cb) = (count[xa as usize] as usize, count[xb as usize + 1] as usize);
+        &self.cols[self.start[y]..self.start[y + 1]][ca..cb]
+    }
+
+    /// Whether row `y` has a member in columns `xa ..= xb`.
+    #[inline(always)]
+    fn any(&self, w: usize, y: usize, (xa, xb): (isize, isize)) -> bool {
+        let count = &self.count[y * (w + 1)..];
+        count[xb as usize + 1] > count[xa as usize]
+    }
+}
+
+/// The receivers' side of pass B.
+struct RowData {
+    /// Prefix sums `[y][x][component]` (`w + 1` entries per row) of `gC` and `gW`.
+    prefix: Vec<f64>,
+    /// Receivers whose occlusion term is evaluated (`e(x) > 0` after the cutoff).
+    focus: RowSet,
+    /// Tail receivers (see the module documentation).
+    tail: RowSet,
+    /// Summed-area count (`(h + 1) x (w + 1)`) of receivers with a non-zero `gC` or `gW`.
+    nonzero: Vec<u32>,
+}
+
+impl RowData {
+    /// Whether a receiver in image columns `x0 ..= x1`, rows `y0 ..= y1` (clipped) has a
+    /// non-zero upstream gradient.
+    fn any_nonzero(
+        &self,
+        w: usize,
+        h: usize,
+        (x0, x1): (isize, isize),
+        (y0, y1): (isize, isize),
+    ) -> bool {
+        let (x0, x1) = (x0.max(0) as usize, (x1 + 1).clamp(0, w as isize) as usize);
+        let (y0, y1) = (y0.max(0) as usize, (y1 + 1).clamp(0, h as isize) as usize);
+        if x0 >= x1 || y0 >= y1 {
+            return false;
+        }
+        let s1 = w + 1;
+        self.nonzero[y1 * s1 + x1] + self.nonzero[y0 * s1 + x0]
+            > self.nonzero[y0 * s1 + x1] + self.nonzero[y1 * s1 + x0]
+    }
+}
+
+/// Pass B over every padded source of the layer (`span_rows[y]`: whether receiver row `y`
+/// was rendered as spans; `tail[i]`: whether receiver `i` is a tail receiver).
+pub(super) fn pass_sources<T: Real>(
+    ctx: &Ctx<'_, T>,
+    shape: &Shape,
+    table: &GaugeTable<T>,
+    span_rows: &[bool],
+    tail: &[bool],
+) -> SourceGradients<T> {
+    let (src, rcv) = (ctx.src, ctx.rcv);
+    let (w, h) = (rcv.width, rcv.height);
+    let is_nonzero = |i: usize| {
+        rcv.g_red[i] != T::zero()
+            || rcv.g_green[i] != T::zero()
+            || rcv.g_blue[i] != T::zero()
+            || rcv.g_weight[i] != T::zero()
+    };
+    let prefix: Vec<f64> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let mut row = vec![0.0f64; (w + 1) * COMPONENTS];
+            let mut run = [0.0f64; COMPONENTS];
+            for x in 0..w {
+                let i = y * w + x;
+                let g = [rcv.g_red[i], rcv.g_green[i], rcv.g_blue[i], rcv.g_weight[i]];
+                for c in 0..COMPONENTS {
+                    run[c] += g[c].f64();
+                    row[(x + 1) * COMPONENTS + c] = run[c];
+                }
+            }
+            row
+        })
+        .collect();
+    let s1 = w + 1;
+    let mut nonzero = vec![0u32; (h + 1) * s1];
+    for y in 0..h {
+        let mut run = 0u32;
+        for x in 0..w {
+            run += u32::from(is_nonzero(y * w + x));
+            nonzero[(y + 1) * s1 + x + 1] = nonzero[y * s1 + x + 1] + run;
+        }
+    }
+    let data = RowData {
+        prefix,
+        focus: RowSet::new(w, h, |i| rcv.focus_weight[i] > T::zero()),
+        tail: RowSet::new(w, h, |i| tail[i] && is_nonzero(i)),
+        nonzero,
+    };
+    let rows: Vec<(Vec<[T; 5]>, f64)> = (0..src.rows)
+        .into_par_iter()
+        .map(|py| source_row_dispatch(ctx, shape, table, span_rows, &data, py))
+        .collect();
+    let n = w * h;
+    let (mut g_lin, mut g_a, mut g_d) = (
+        vec![[T::zero(); 3]; n],
+        vec![T::zero(); n],
+        vec![T::zero(); n],
+    );
+    let mut k_total = 0.0;
+    let mut p = 0;
+    for (row, k) in rows {
+        k_total += k;
+        for v in row {
+            let s = src.source[p];
+            for c in 0..3 {
+                g_lin[s][c] = g_lin[s][c] + v[c];
+            }
+            g_a[s] = g_a[s] + v[3];
+            g_d[s] = g_d[s] + v[4];
+            p += 1;
+        }
+    }
+    (g_lin, g_a, g_d, k_total)
+}
+
+avx2_dispatch!(
+    source_row_dispatch,
+    source_row_avx2,
+    source_row,
+    (
+        ctx: &Ctx<'_, T>,
+        shape: &Shape,
+        table: &GaugeTable<T>,
+        span_rows: &[bool],
+        data: &RowData,
+        py: usize
+    ) -> (Vec<[T; 5]>, f64)
+);
+
+/// A source's terms.
+#[derive(Clone, Copy)]
+struct Source<T> {
+    terms: SourceTerms<T>,
+    /// Image column and row.
+    xs: isize,
+    ys: isize,
+    /// Alpha > 0: every sum; else only `sum gc S O`.
+    full: bool,
+}
+
+/// The sums of pass B for one source: `[sum gC S O (3), sum gc S O, sum gc O (S' - S A'/A),
+/// sum gc S dO/dd_y]`.
+type Sums<T> = [T; 6];
+
+/// Pass B over the padded source row `py`: per padded pixel
+/// `[g_lin r, g, b, g_alpha, g_disp]` and K's share.
+#[inline(always)]
+fn source_row<T: Real>(
+    ctx: &Ctx<'_, T>,
+    shape: &Shape,
+    table: &GaugeTable<T>,
+    span_rows: &[bool],
+    data: &RowData,
+    py: usize,
+) -> (Vec<[T; 5]>, f64) {
+    let src = ctx.src;
+    let (stride, pad) = (src.stride, src.pad);
+    let (w, h) = (ctx.rcv.width, ctx.rcv.height);
+    let k = ctx.k;
+    let big_r = table.big_r as f64;
+    let mut out = vec![[T::zero(); 5]; stride];
+    let mut k_row = 0.0f64;
+    for px in 0..stride {
+        let p = py * stride + px;
+        let (a, r) = (src.alpha[p], src.radius[p]);
+        let (xs, ys) = (px as isize - pad as isize, py as isize - pad as isize);
+        let reach = (r.f64() + TAP_ROW_TAIL_PX).min(big_r).floor() as isize;
+        if !data.any_nonzero(w, h, (xs - reach, xs + reach), (ys - reach, ys + reach)) {
+            continue;
+        }
+        let s = Source {
+            terms: SourceTerms {
+                step: src.step,
+                radius: r,
+                dlog_area: model::source_area_log_derivative(src.step, r),
+                rel_disp: src.rel_disp[p],
+                lin: [src.red[p], src.green[p], src.blue[p]],
+            },
+            xs,
+            ys,
+            full: a != T::zero(),
+        };
+        let acc = match src.step {
+            model::ScatterStep::Sharp => {
+                source_sums::<T, true>(ctx, shape, table, span_rows, data, s)
+            }
+            model::ScatterStep::Paper => {
+                source_sums::<T, false>(ctx, shape, table, span_rows, data, s)
+            }
+        };
+        let inv_area = src.inv_area[p];
+        let a_inv = a * inv_area;
+        let g_r = acc[4] * a_inv;
+        let d_y = s.terms.rel_disp;
+        out[px] = [
+            acc[0] * a_inv,
+            acc[1] * a_inv,
+            acc[2] * a_inv,
+            acc[3] * inv_area,
+            acc[5] * a_inv + g_r * k * model::scatter_radius_sign(d_y),
+        ];
+        k_row += (g_r * d_y.abs()).f64();
+    }
+    (out, k_row)
+}
+
+/// One tap of pass B: receiver `i` (image index) with scatter term `s`, its derivative
+/// `sd` with respect to `r`, occlusion `o` and `dO/dd_y`, added to `acc`.
+#[inline(always)]
+fn add_tap<T: Real>(
+    ctx: &Ctx<'_, T>,
+    src: &Source<T>,
+    i: usize,
+    (s, sd): (T, T),
+    (o, d_o): (T, T),
+    acc: &mut Sums<T>,
+) {
+    let rcv = ctx.rcv;
+    let lin = src.terms.lin;
+    let g = [rcv.g_red[i], rcv.g_green[i], rcv.g_blue[i]];
+    let gc = g[0] * lin[0] + g[1] * lin[1] + g[2] * lin[2] + rcv.g_weight[i];
+    let so = s * o;
+    for c in 0..3 {
+        acc[c] = acc[c] + g[c] * so;
+    }
+    acc[3] = acc[3] + gc * so;
+    acc[4] = acc[4] + gc * o * model::normalised_scatter_radius_factor(s, sd, src.terms.dlog_area);
+    acc[5] = acc[5] + gc * s * d_o;
+}
+
+/// The occlusion term of receiver `i` for the source, with its derivative with respect to
+/// the source's disparity: `(1, 0)` where the fast adjoint takes `O = 1` (`e(x) < 1e-9`,
+/// and the centre tap).
+#[inline(always)]
+fn occlusion<T: Real>(ctx: &Ctx<'_, T>, src: &Source<T>, i: usize, centre: bool) -> (T, T) {
+    let e = ctx.rcv.focus_weight[i];
+    if e > T::zero() && !centre {
+        model::occlusion_fast_with_derivative(e, src.terms.rel_disp, ctx.rcv.rel_disp[i])
+    } else {
+        (T::one(), T::zero())
+    }
+}
+
+/// The exact tap of receiver column `x` of image row `yr` (row offset `dy`), scalar.
+#[inline(always)]
+fn exact_tap<T: Real, const SHARP: bool>(
+    ctx: &Ctx<'_, T>,
+    table: &GaugeTable<T>,
+    src: &Source<T>,
+    (yr, dy): (usize, isize),
+    x: isize,
+    acc: &mut Sums<T>,
+) {
+    let w = ctx.rcv.width;
+    let t = (dy + table.big_r as isize) as usize;
+    let m = (t * table.stride + table.big_r + TABLE_MARGIN) as isize + x - src.xs;
+    let (g, mask) = (table.gauge[m as usize], table.mask[m as usize]);
+    let u = (src.terms.radius - g).max(T::c(STEP_ARGUMENT_MIN));
+    let s = if SHARP {
+        model::sharp_step_fast(u)
+    } else {
+        model::soft_step_fast(u)
+    } * mask;
+    let sd = model::scatter_step_derivative(ctx.src.step, s);
+    let i = yr * w + x as usize;
+    let centre = dy == 0 && x == src.xs;
+    let o = occlusion(ctx, src, i, centre);
+    add_tap(ctx, src, i, (s, sd), o, acc);
+}
+
+/// The taps of receiver columns `xa ..= xb` of image row `yr` (row offset `dy`): 8-lane
+/// runs (the fast adjoint's), the centre tap (`O = 1`) scalar.
+#[inline(always)]
+fn run_taps<T: Real, const SHARP: bool>(
+    ctx: &Ctx<'_, T>,
+    table: &GaugeTable<T>,
+    data: &RowData,
+    src: &Source<T>,
+    (yr, dy): (usize, isize),
+    (xa, xb): (isize, isize),
+    acc: &mut Sums<T>,
+) {
+    if xa > xb {
+        return;
+    }
+    if dy == 0 && (xa..=xb).contains(&src.xs) {
+        run_taps::<T, SHARP>(ctx, table, data, src, (yr, dy), (xa, src.xs - 1), acc);
+        exact_tap::<T, SHARP>(ctx, table, src, (yr, dy), src.xs, acc);
+        run_taps::<T, SHARP>(ctx, table, data, src, (yr, dy), (src.xs + 1, xb), acc);
+        return;
+    }
+    let w = ctx.rcv.width;
+    let big_r = ctx.tables.big_r as isize;
+    let occ = data.focus.any(w, yr, (xa, xb));
+    let (i0, n) = (yr * w + xa as usize, (xb - xa + 1) as usize);
+    let g0 = (xa - src.xs + big_r) as usize;
+    let gauge = &ctx.gauge_flip[(dy + big_r) as usize][g0..g0 + n];
+    let rcv = ctx.rcv;
+    let v = match (occ, src.full) {
+        (true, true) => source_run::<T, true, true>(rcv, i0, gauge, src.terms),
+        (true, false) => source_run::<T, true, false>(rcv, i0, gauge, src.terms),
+        (false, true) => source_run::<T, false, true>(rcv, i0, gauge, src.terms),
+        (false, false) => source_run::<T, false, false>(rcv, i0, gauge, src.terms),
+    };
+    for (a, b) in acc.iter_mut().zip(v) {
+        *a = *a + b;
+    }
+}
+
+/// Pass B's sums of one source over its disc.
+#[inline(always)]
+fn source_sums<T: Real, const SHARP: bool>(
+    ctx: &Ctx<'_, T>,
+    shape: &Shape,
+    table: &GaugeTable<T>,
+    span_rows: &[bool],
+    data: &RowData,
+    src: Source<T>,
+) -> Sums<T> {
+    let (w, h) = (ctx.rcv.width as isize, ctx.rcv.height as isize);
+    let rings = Rings::of(ctx.src.step);
+    let rf = src.terms.radius.f64();
+    let reach = (rf + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize;
+    let mut acc: Sums<T> = [T::zero(); 6];
+    // Interior sums of gC and gW (S = 1, O = 1).
+    let mut interior = [0.0f64; COMPONENTS];
+    for dy in -reach..=reach {
+        let yr = src.ys + dy;
+        if yr < 0 || yr >= h {
+            continue;
+        }
+        let Some(hw) = table.window_half_width(dy) else {
+            continue;
+        };
+        let yr = yr as usize;
+        let clip = |(lo, hi): (isize, isize)| ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
+        // Every tap within the fast adjoint's reach on this row.
+        let Some((lo, hi)) = shape.interval(rf + TAP_ROW_TAIL_PX, dy, -1.0) else {
+            continue;
+        };
+        let hwi = hw as isize;
+        let (fa, fb) = clip((lo.max(-hwi), hi.min(hwi)));
+        if fa > fb {
+            continue;
+        }
+        if !span_rows[yr] {
+            run_taps::<T, SHARP>(ctx, table, data, &src, (yr, dy), (fa, fb), &mut acc);
+            continue;
+        }
+        let disc = disc_row(shape, rings, rf, dy, hw, -1.0);
+        // The columns the forward's disc row covers (image columns; empty if none).
+        let (da, db) = match disc {
+            None => (fb + 1, fb),
+            Some(d) => {
+                let first = d.left.or(d.interior).map_or(0, |r| r.0);
+                let last = d.right.or(d.interior).or(d.left).map_or(-1, |r| r.1);
+                clip((first, last))
+            }
+        };
+        // Tail receivers beyond the forward's ring: exact taps.
+        for part in [(fa, fb.min(da - 1)), (fa.max(db + 1), fb)] {
+            for &x in data.tail.within(ctx.rcv.width, yr, part) {
+                exact_tap::<T, SHARP>(ctx, table, &src, (yr, dy), x as isize, &mut acc);
+            }
+        }
+        let Some(disc) = disc else {
+            continue;
+        };
+        if let Some(run) = disc.interior {
+            let (xa, xb) = clip(run);
+            if xa <= xb {
+                let row = &data.prefix[yr * (ctx.rcv.width + 1) * COMPONENTS..];
+                let (ia, ib) = (xa as usize * COMPONENTS, (xb as usize + 1) * COMPONENTS);
+                for c in 0..COMPONENTS {
+                    interior[c] += row[ib + c] - row[ia + c];
+                }
+                // Receivers whose occlusion term is evaluated: O - 1 and dO/dd_y on top.
+                for &x in data.focus.within(ctx.rcv.width, yr, (xa, xb)) {
+                    if dy == 0 && x as isize == src.xs {
+                        continue;
+                    }
+                    let i = yr * ctx.rcv.width + x as usize;
+                    let (o, d_o) = occlusion(ctx, &src, i, false);
+                    add_tap(
+                        ctx,
+                        &src,
+                        i,
+                        (T::one(), T::zero()),
+                        (o - T::one(), d_o),
+                        &mut acc,
+                    );
+                }
+            }
+        }
+        for run in [disc.left, disc.right].into_iter().flatten() {
+            run_taps::<T, SHARP>(ctx, table, data, &src, (yr, dy), clip(run), &mut acc);
+        }
+    }
+    // The interior's terms: S = 1, S' = 0, O = 1.
+    let ic: [T; COMPONENTS] = interior.map(T::c);
+    let lin = src.terms.lin;
+    let gc = ic[0] * lin[0] + ic[1] * lin[1] + ic[2] * lin[2] + ic[3];
+    for c in 0..3 {
+        acc[c] = acc[c] + ic[c];
+    }
+    acc[3] = acc[3] + gc;
+    acc[4] = acc[4]
+        + gc * model::normalised_scatter_radius_factor(T::one(), T::zero(), src.terms.dlog_area);
+    acc
+}
