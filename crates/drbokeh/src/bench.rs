@@ -104,6 +104,19 @@ pub fn uniform_blur(width: usize, height: usize) -> LayerStack<f32> {
     LayerStack::new(vec![l]).unwrap()
 }
 
+/// [`uniform_blur`] with every pixel's disparity jittered by up to `0.05` (deterministic):
+/// at focus 0.5 and blur K, radii `K (0.5 - 0.05 u)`, `u` uniform in `[0, 1)`, so no two
+/// neighbours share a radius (the sweep's worst case for the span engine, where no disc
+/// profile is shared).
+pub fn jittered_blur(width: usize, height: usize) -> LayerStack<f32> {
+    let mut stack = uniform_blur(width, height);
+    let mut rng = XorShift(0x2545_f491_4f6c_dd1d);
+    for d in stack.layers[0].disparity.data.iter_mut() {
+        *d = (0.05 * rng.next()) as f32;
+    }
+    stack
+}
+
 fn settings(focus: f64, k: f64, window: Window) -> RenderSettings {
     let mut s = RenderSettings::paper(focus);
     s.camera.blur_k = k;
@@ -321,6 +334,16 @@ pub fn workloads_where(quick: bool, keep: impl Fn(&str) -> bool) -> Vec<Workload
             } else {
                 vec![Engine::Spans]
             },
+        );
+        // The same radius with every pixel's radius different (up to 10% smaller).
+        add(
+            &format!("sweep-{sweep_size}px-1L-r{r}-jittered"),
+            &|| {
+                let mut s = settings(0.5, 2.0 * r, Window::auto_unclipped(r));
+                s.preset = Preset::Physical;
+                (jittered_blur(sweep_size, sweep_size), s)
+            },
+            vec![Engine::Spans],
         );
         if quick && r >= 50.0 {
             break;

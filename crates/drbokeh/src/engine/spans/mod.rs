@@ -20,7 +20,10 @@
 //! the row offset and the window, so consecutive sources of equal radius share one
 //! evaluated profile, and coverage receivers of equal coverage
 //! radius share one gathered disc: exact (the same values summed in the same order), and
-//! the common case in layers of constant or row-constant disparity.
+//! the common case in layers of constant or row-constant disparity. A run of sources in
+//! adjacent columns sharing a profile whose ring is one chunk on each side is added as
+//! whole vectors (each span write and each ring lane a contiguous multiply-add over the
+//! run), not source by source: the same terms, summed in another fixed order.
 //!
 //! **Approximations and their bounds** (all relative; each tested at its worst case in
 //! `tests/spans.rs`):

@@ -262,6 +262,14 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
         }
         caches.clear();
         caches.resize_with(sources.len(), || None);
+        if circle {
+            for (c, plane) in profiles.v_planes.iter_mut().enumerate() {
+                plane.clear();
+                plane.extend(sources.iter().map(|s| s.v[c]));
+            }
+            profiles.v64.clear();
+            profiles.v64.extend(sources.iter().flat_map(|s| s.v64));
+        }
         let (dy0, dy1) = (lo.max(-max_reach), hi.min(max_reach));
         if circle {
             // Rows dy and -dy share their intervals and ring profile.
@@ -409,15 +417,38 @@ fn in_run(c: isize, (_, last, step): (isize, isize, isize)) -> bool {
 }
 
 /// The ring profiles of one disc row of a source row's sources (the circle's two-phase
-/// sweep): the steps of every source are evaluated first (independent chunks, which the
-/// processor overlaps), then added.
+/// sweep): the steps of every distinct radius are evaluated first (independent chunks,
+/// which the processor overlaps), then every source adds its row.
 #[derive(Default)]
 struct Profiles<T> {
-    /// Steps, each source's run of chunks followed by [`LANES`] zeros.
+    /// Steps, each profile's run of chunks followed by [`LANES`] zeros.
     values: Vec<T>,
-    /// Per source with a row here: its index, row intervals and the offset of `|dx| = 0`
-    /// (`dx = 0` for rows without an interior, whose profile is stored mirrored).
-    entries: Vec<(usize, DiscRow, isize)>,
+    /// The evaluated profiles.
+    rows: Vec<Profile>,
+    /// Per source of the source row: the index of its profile, or [`NO_ROW`].
+    of_source: Vec<u32>,
+    /// The source row's weights `v` per component (`[component][source]`) ...
+    v_planes: [Vec<T>; COMPONENTS],
+    /// ... and in f64, `[source][component]`.
+    v64: Vec<f64>,
+}
+
+/// [`Profiles::of_source`] of a source without taps on this disc row.
+const NO_ROW: u32 = u32::MAX;
+
+/// One disc row's intervals and where its steps are.
+#[derive(Clone, Copy)]
+struct Profile {
+    disc: DiscRow,
+    /// The offset of `|dx| = 0` in the values (`dx = 0` for rows without an interior,
+    /// whose profile is stored mirrored).
+    base: isize,
+    /// For rows with an interior: the offset of `dx = 0` in the reversed left ring, whose
+    /// lane `dx` (negative) is at `left + dx`.
+    left: isize,
+    /// `Some(k0)` for the common row: an interior `-(k0 - 1) ..= k0 - 1` and a ring of at
+    /// most one chunk on each side (its profile then holds zeros beyond the ring's end).
+    one_chunk: Option<isize>,
 }
 
 /// Rows `dy = +-ady` (`rows`: their sub-band rows, where in the sub-band) of every source
@@ -438,7 +469,9 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     // Phase 1: intervals and steps. The profile S(r - g(dx, ady)) is evaluated at ring
     // columns |dx| = k0 ..= outer_hi (the circle is symmetric in dx), followed by zeros so
     // that the outward extension of the chunks adds nothing.
-    profiles.entries.clear();
+    profiles.rows.clear();
+    profiles.of_source.clear();
+    profiles.of_source.resize(sources.len(), NO_ROW);
     // At most 3 n + 2 LANES values per source (a mirrored run of n = R + 1 steps).
     let need = sources.len() * (3 * (ctx.table.big_r + 1) + 3 * LANES);
     if profiles.values.len() < need {
@@ -448,32 +481,57 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     let mut next = 0usize;
     // The previous source's half-widths guess the next one's.
     let mut guess = (0, 0);
-    // The last source whose profile was evaluated: its radius and entry. A source with the
-    // same radius has the same row intervals and profile (they depend on `r`, `ady` and
-    // the window only), so it shares that profile: exact, and the common case in layers
-    // of constant (or row-constant) disparity.
-    let mut last: Option<(T, usize)> = None;
+    // The last source whose profile was evaluated: its radius and profile. A source with
+    // the same radius has the same row intervals and profile (they depend on `r`, `ady`
+    // and the window only), so it shares that profile: exact, and the common case in
+    // layers of constant (or row-constant) disparity.
+    let mut last: Option<(T, u32)> = None;
     for (i, src) in sources.iter().enumerate() {
         if src.reach < ady {
             continue;
         }
-        if let Some((r, e)) = last {
+        if let Some((r, p)) = last {
             if src.r == r {
-                let (_, disc, base) = profiles.entries[e];
-                profiles.entries.push((i, disc, base));
+                profiles.of_source[i] = p;
                 continue;
             }
         }
         let Some(disc) = circle_row(src, ady, hw, &mut guess) else {
             continue;
         };
-        last = Some((src.r, profiles.entries.len()));
+        let p = profiles.rows.len() as u32;
+        last = Some((src.r, p));
+        profiles.of_source[i] = p;
         let k0 = disc.interior.map_or(0, |(_, hi)| hi + 1);
         let outer_hi = match (disc.interior, disc.left, disc.right) {
             (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
             _ => k0 - 1,
         };
         let n = (outer_hi + 1 - k0).max(0) as usize;
+        let one_chunk = disc.interior.is_some()
+            && disc.right.is_some()
+            && outer_hi - k0 < lanes
+            && disc.left == Some((-outer_hi, -k0));
+        if one_chunk {
+            // The common row: [S(k0) .. S(outer_hi), zeros | zeros | the same reversed],
+            // the reversed chunk (the left ring) built in registers.
+            let s = ring_steps::<T, SHARP>(ctx.table, src.r, ady, k0);
+            let s: [T; LANES] = std::array::from_fn(|l| if l < n { s[l] } else { T::zero() });
+            let rev: [T; LANES] = std::array::from_fn(|l| s[LANES - 1 - l]);
+            values[next..next + LANES].copy_from_slice(&s);
+            values[next + LANES..next + 2 * LANES].fill(T::zero());
+            values[next + 2 * LANES..next + 3 * LANES].copy_from_slice(&rev);
+            // Lanes |dx| = k0 .. k0 + LANES - 1 of the reversed chunk at `left - |dx|`;
+            // up to LANES beyond it, zeros.
+            profiles.rows.push(Profile {
+                disc,
+                base: next as isize - k0,
+                left: (next + 2 * LANES + LANES - 1) as isize + k0,
+                one_chunk: Some(k0),
+            });
+            next += 3 * LANES;
+            continue;
+        }
         let mut k = k0;
         while k <= outer_hi {
             let s = ring_steps::<T, SHARP>(ctx.table, src.r, ady, k);
@@ -493,72 +551,175 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
             for kk in 1..n {
                 values[centre - kk] = values[next + kk];
             }
-            profiles.entries.push((i, disc, centre as isize));
+            profiles.rows.push(Profile {
+                disc,
+                base: centre as isize,
+                left: 0,
+                one_chunk: None,
+            });
             next = centre + n + LANES;
         } else {
-            profiles.entries.push((i, disc, next as isize - k0));
-            next += n + LANES;
+            // The left ring reversed after the right one, [zeros | S(outer_hi) .. S(k0)],
+            // so that a left chunk is one contiguous load: lanes of a chunk from
+            // dx0 <= -k0 - (LANES - 1) hold |dx| = -(dx0 + l), at `left + dx0 + l`.
+            let rev = next + n + LANES;
+            for q in 0..n + LANES {
+                values[rev + q] = values[next + n + LANES - 1 - q];
+            }
+            profiles.rows.push(Profile {
+                disc,
+                base: next as isize - k0,
+                left: (rev + n + LANES - 1) as isize + k0,
+                one_chunk: None,
+            });
+            next = rev + n + LANES;
         }
     }
-    // Phase 2: interiors and ring chunks.
+    // Phase 2: interiors and ring chunks, source by source; a run of sources in adjacent
+    // columns sharing a common-row profile is added as whole vectors (below).
     let values = &profiles.values;
     let w = ctx.width as isize;
+    let (len, d_len) = (acc.ring_len(), (ctx.width + 1) * COMPONENTS);
     let mut work = 0;
-    for &(i, disc, base) in &profiles.entries {
-        let (src, cache) = (&sources[i], &mut caches[i]);
-        if let Some(run) = disc.interior {
-            for row in rows.into_iter().flatten() {
-                work += interior::<T, FOCUS>(ctx, src, run, row, acc, cache);
-            }
+    let n_sources = sources.len();
+    let of_source = &profiles.of_source;
+    let mut i = 0;
+    while i < n_sources {
+        let p = of_source[i];
+        if p == NO_ROW {
+            i += 1;
+            continue;
         }
-        // The common row: an interior, a ring of at most one chunk on each side (its
-        // profile then holds zeros beyond the ring's end), both chunks within the
-        // accumulators' margins: two chunks per row, no runs.
-        if let (Some((_, hi)), Some(_)) = (disc.interior, disc.right) {
-            let k0 = hi + 1;
-            let outer_hi = disc.right.map_or(hi, |(_, o)| o);
-            let one_chunk = outer_hi - k0 < lanes && disc.left == Some((-outer_hi, -k0));
-            if one_chunk && src.xs >= k0 && src.xs + k0 <= w {
-                let at = (base + k0) as usize;
+        let prof = &profiles.rows[p as usize];
+        let src = &sources[i];
+        if let (false, Some(k0)) = (FOCUS, prof.one_chunk) {
+            // The sources i .. j in adjacent columns with this profile whose chunks lie
+            // within the accumulators' margins (then their spans are not clipped either).
+            let inside = |x: isize| x >= k0 && x + k0 <= w;
+            let mut j = i;
+            while j < n_sources
+                && of_source[j] == p
+                && sources[j].xs == src.xs + (j - i) as isize
+                && inside(sources[j].xs)
+            {
+                j += 1;
+            }
+            if j - i >= RUN_MIN {
+                let at = (prof.base + k0) as usize;
                 let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                let left: [T; LANES] = std::array::from_fn(|l| right[LANES - 1 - l]);
+                let at = (prof.left - k0 - (LANES as isize - 1)) as usize;
+                let left: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                let m = j - i;
+                let (xa, xb1) = ((src.xs - k0 + 1) as usize, (src.xs + k0) as usize);
+                let (rs, ls) = (
+                    (src.xs + k0) as usize + MARGIN,
+                    (src.xs - k0 - (LANES as isize - 1)) as usize + MARGIN,
+                );
+                let v64 = &profiles.v64[i * COMPONENTS..j * COMPONENTS];
                 for row in rows.into_iter().flatten() {
-                    ring_add::<T, FOCUS>(ctx, src, row, src.xs + k0, right, acc, cache);
-                    ring_add::<T, FOCUS>(
-                        ctx,
-                        src,
-                        row,
-                        src.xs - k0 - (lanes - 1),
-                        left,
-                        acc,
-                        cache,
-                    );
-                    work += 2 * LANES as u64;
+                    let diff = &mut acc.diff[row * d_len..(row + 1) * d_len];
+                    run_span_write(diff, xa, xb1, v64);
+                    let ring = &mut acc.ring[row * COMPONENTS * len..][..COMPONENTS * len];
+                    for c in 0..COMPONENTS {
+                        let v = &profiles.v_planes[c][i..j];
+                        let ring = &mut ring[c * len..(c + 1) * len];
+                        run_chunk_add(&mut ring[rs..rs + m + LANES - 1], &right, v);
+                        run_chunk_add(&mut ring[ls..ls + m + LANES - 1], &left, v);
+                    }
+                    work += (2 * LANES as u64 + 2) * m as u64;
                 }
+                i = j;
                 continue;
             }
         }
-        let runs = chunk_runs(&disc, src.xs, w);
+        work += add_general::<T, FOCUS>(ctx, src, prof, values, rows, acc, &mut caches[i]);
+        i += 1;
+    }
+    work
+}
+
+/// The shortest run of sources added as whole vectors ([`scatter_rows_circle`]).
+const RUN_MIN: usize = 4;
+
+/// The interior spans of a run of `v.len() / COMPONENTS` sources in adjacent columns:
+/// each adds its `v` at `xa + k` and subtracts it at `xb1 + k` (source `k` of the run).
+#[inline(always)]
+fn run_span_write(diff: &mut [f64], xa: usize, xb1: usize, v: &[f64]) {
+    let n = v.len();
+    for (d, v) in diff[xa * COMPONENTS..xa * COMPONENTS + n].iter_mut().zip(v) {
+        *d += *v;
+    }
+    for (d, v) in diff[xb1 * COMPONENTS..xb1 * COMPONENTS + n]
+        .iter_mut()
+        .zip(v)
+    {
+        *d -= *v;
+    }
+}
+
+/// The ring chunks `s` of a run of sources in adjacent columns, weighted by their `v`:
+/// `out[k + l] += s[l] v[k]`, lane by lane (each a contiguous multiply-add over the run).
+#[inline(always)]
+fn run_chunk_add<T: Real>(out: &mut [T], s: &[T; LANES], v: &[T]) {
+    let m = v.len();
+    for l in 0..LANES {
+        let sl = s[l];
+        for (o, v) in out[l..l + m].iter_mut().zip(v) {
+            *o = *o + sl * *v;
+        }
+    }
+}
+
+/// A source's disc row `prof` into `rows`: its interior span and its ring chunk by chunk
+/// (any row of a circle, and in-focus receivers).
+#[inline(always)]
+fn add_general<T: Real, const FOCUS: bool>(
+    ctx: &BandLayer<'_, T>,
+    src: &Source<T>,
+    prof: &Profile,
+    values: &[T],
+    rows: [Option<usize>; 2],
+    acc: &mut Acc<T>,
+    cache: &mut Option<Coefficients<T>>,
+) -> u64 {
+    let (disc, lanes, w) = (prof.disc, LANES as isize, ctx.width as isize);
+    let mut work = 0;
+    if let Some(run) = disc.interior {
         for row in rows.into_iter().flatten() {
-            for run in runs {
-                let mut start = run.0;
-                while in_run(start, run) {
-                    let dx0 = start - src.xs;
-                    let s: [T; LANES] = if dx0 < 0 && disc.interior.is_some() {
-                        // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l).
-                        // One vector load, then reversed in registers (indexing the slice
-                        // backwards compiles to eight scalar loads).
-                        let at = (base - (dx0 + lanes - 1)) as usize;
-                        let half: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                        std::array::from_fn(|l| half[LANES - 1 - l])
-                    } else {
-                        let at = (base + dx0) as usize;
-                        values[at..at + LANES].try_into().expect("LANES")
-                    };
-                    ring_add::<T, FOCUS>(ctx, src, row, start, s, acc, cache);
-                    work += LANES as u64;
-                    start += run.2;
-                }
+            work += interior::<T, FOCUS>(ctx, src, run, row, acc, cache);
+        }
+    }
+    if let Some(k0) = prof.one_chunk {
+        if src.xs >= k0 && src.xs + k0 <= w {
+            let at = (prof.base + k0) as usize;
+            let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+            let at = (prof.left - k0 - (lanes - 1)) as usize;
+            let left: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+            for row in rows.into_iter().flatten() {
+                ring_add::<T, FOCUS>(ctx, src, row, src.xs + k0, right, acc, cache);
+                ring_add::<T, FOCUS>(ctx, src, row, src.xs - k0 - (lanes - 1), left, acc, cache);
+                work += 2 * LANES as u64;
+            }
+            return work;
+        }
+    }
+    let runs = chunk_runs(&disc, src.xs, w);
+    for row in rows.into_iter().flatten() {
+        for run in runs {
+            let mut start = run.0;
+            while in_run(start, run) {
+                let dx0 = start - src.xs;
+                let at = if dx0 < 0 && disc.interior.is_some() {
+                    // Left of the interior (dx0 + LANES - 1 < 0): |dx| = -(dx0 + l), from
+                    // the reversed copy.
+                    prof.left + dx0
+                } else {
+                    prof.base + dx0
+                } as usize;
+                let s: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
+                ring_add::<T, FOCUS>(ctx, src, row, start, s, acc, cache);
+                work += LANES as u64;
+                start += run.2;
             }
         }
     }
