@@ -68,15 +68,20 @@ fn print_row(r: &BenchRow) {
 fn print_adjoint(r: &AdjointRow) {
     let opt = |v: Option<f64>, f: &dyn Fn(f64) -> String| v.map(f).unwrap_or_else(|| "-".into());
     println!();
-    println!("| adjoint workload | forward (fast) s | forward+tape (fast) s | backward (fast) s | backward/forward | forward+tape (threaded) s | backward (threaded) s | max grad diff | max grad |");
-    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!("| adjoint workload | forward (fast) s | forward+tape (fast) s | backward (fast) s | backward/forward | forward (auto) s | forward+tape (auto) s | backward (spans) s | backward/forward (auto) | spans vs fast max grad diff | forward+tape (threaded) s | backward (threaded) s | max grad diff | max grad |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
     println!(
-        "| {} | {:.3} | {:.3} | {:.3} | {:.2}x | {} | {} | {} | {} |",
+        "| {} | {:.3} | {:.3} | {:.3} | {:.2}x | {:.3} | {:.3} | {:.3} | {:.2}x | {:.2e} | {} | {} | {} | {} |",
         r.workload,
         r.forward_fast,
         r.forward_tape_fast,
         r.backward_fast,
         r.backward_over_forward,
+        r.forward_auto,
+        r.forward_tape_auto,
+        r.backward_auto,
+        r.backward_over_forward_auto,
+        r.max_grad_diff_auto_fast,
         opt(r.forward_tape_threaded, &|v| format!("{v:.3}")),
         opt(r.backward_threaded, &|v| format!("{v:.3}")),
         opt(r.max_grad_diff, &|v| format!("{v:.2e}")),

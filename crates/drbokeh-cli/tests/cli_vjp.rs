@@ -161,11 +161,11 @@ fn vjp_rejects_bad_gradients() {
     assert!(!out.exists());
 }
 
-/// Without --f64, `--engine auto` runs the adjoint on the fast engine: the CLI's gradient is
-/// the library's `render_with_tape_on(.., Engine::Fast, ..)` in f32, and `--engine
-/// threaded` the exact one.
+/// Without --f64, `--engine auto` runs the span adjoint: the CLI's gradient is the
+/// library's `render_with_tape_on(.., Engine::Auto, ..)` in f32; `--engine fast` is the fast
+/// adjoint and `--engine threaded` the exact one.
 #[test]
-fn vjp_auto_in_f32_uses_the_fast_adjoint() {
+fn vjp_engines_in_f32_are_the_library_adjoints() {
     let dir = tempfile::tempdir().unwrap();
     let stack_path = dir.path().join("s.npz");
     let stack = write_stack(&stack_path, 13, 10).cast::<f32>();
@@ -180,7 +180,8 @@ fn vjp_auto_in_f32_uses_the_fast_adjoint() {
     s.camera.window = drbokeh::Window::from_size(11).unwrap();
     let gi = drbokeh::Image::from_vec(13, 10, 3, g.iter().copied().collect()).unwrap();
     for (engine, want_engine) in [
-        ("auto", drbokeh::Engine::Fast),
+        ("auto", drbokeh::Engine::Auto),
+        ("fast", drbokeh::Engine::Fast),
         ("threaded", drbokeh::Engine::Threaded),
     ] {
         let out = dir.path().join(format!("grads-{engine}.npz"));

@@ -7,8 +7,8 @@
 
 use crate::camera::WindowCap;
 use crate::demo;
-use crate::engine::render_with_tape_on;
 use crate::engine::{render_with_stats, Engine, NoProgress};
+use crate::engine::{render_with_tape_on, Gradients};
 use crate::image::Image;
 use crate::model;
 use crate::presets::{Preset, RenderSettings};
@@ -499,7 +499,8 @@ pub fn run_workload(w: &Workload, report: &mut dyn FnMut(&BenchRow)) -> Result<V
 }
 
 /// The adjoint workload: forward (fast), forward with tape and backward on the fast
-/// schedule, and (when `with_threaded`) the exact threaded adjoint for comparison.
+/// schedule, the same on `auto` (the span adjoint), and (when `with_threaded`) the exact
+/// threaded adjoint for comparison.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct AdjointRow {
     /// Workload name.
@@ -512,6 +513,17 @@ pub struct AdjointRow {
     pub backward_fast: f64,
     /// `backward_fast / forward_fast`.
     pub backward_over_forward: f64,
+    /// Wall seconds of `render(.., Engine::Auto, ..)` (spans where they are cheaper).
+    pub forward_auto: f64,
+    /// Wall seconds of the auto forward with tape (the span render, recorded).
+    pub forward_tape_auto: f64,
+    /// Wall seconds of the span adjoint's backward (`Engine::Auto`'s tape).
+    pub backward_auto: f64,
+    /// `backward_auto / forward_auto`.
+    pub backward_over_forward_auto: f64,
+    /// Largest absolute difference between the span adjoint's and the fast adjoint's
+    /// gradients (all layers and kinds).
+    pub max_grad_diff_auto_fast: f64,
     /// Wall seconds of the threaded forward with tape, if measured.
     pub forward_tape_threaded: Option<f64>,
     /// Wall seconds of the threaded (exact) backward, if measured.
@@ -558,12 +570,27 @@ pub fn run_adjoint(w: &Workload, with_threaded: bool) -> Result<AdjointRow> {
     let fast = tape.backward(&g, &NoProgress)?;
     let backward_fast = t.elapsed().as_secs_f64();
     drop(tape);
+    let t = Instant::now();
+    render_with_stats(&w.stack, &w.settings, Engine::Auto, &NoProgress)?;
+    let forward_auto = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (_, tape) = render_with_tape_on(&w.stack, &w.settings, Engine::Auto, &NoProgress)?;
+    let forward_tape_auto = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let auto = tape.backward(&g, &NoProgress)?;
+    let backward_auto = t.elapsed().as_secs_f64();
+    drop(tape);
     let mut row = AdjointRow {
         workload: w.name.clone(),
         forward_fast,
         forward_tape_fast,
         backward_fast,
         backward_over_forward: backward_fast / forward_fast,
+        forward_auto,
+        forward_tape_auto,
+        backward_auto,
+        backward_over_forward_auto: backward_auto / forward_auto,
+        max_grad_diff_auto_fast: max_gradient_difference(&auto, &fast).0,
         forward_tape_threaded: None,
         backward_threaded: None,
         max_grad_diff: None,
@@ -576,21 +603,28 @@ pub fn run_adjoint(w: &Workload, with_threaded: bool) -> Result<AdjointRow> {
         let t = Instant::now();
         let exact = tape.backward(&g, &NoProgress)?;
         row.backward_threaded = Some(t.elapsed().as_secs_f64());
-        let (mut diff, mut max) = (0.0f64, 0.0f64);
-        for (a, b) in exact.layers.iter().zip(&fast.layers) {
-            for (x, y) in [
-                (&a.rgb, &b.rgb),
-                (&a.alpha, &b.alpha),
-                (&a.disparity, &b.disparity),
-            ] {
-                for (p, q) in x.data.iter().zip(&y.data) {
-                    diff = diff.max((*p as f64 - *q as f64).abs());
-                    max = max.max((*p as f64).abs());
-                }
-            }
-        }
+        let (diff, max) = max_gradient_difference(&exact, &fast);
         row.max_grad_diff = Some(diff);
         row.max_grad = Some(max);
     }
     Ok(row)
+}
+
+/// The largest absolute difference between two sets of gradients (all layers and kinds),
+/// and the largest absolute value of the first.
+fn max_gradient_difference(a: &Gradients<f32>, b: &Gradients<f32>) -> (f64, f64) {
+    let (mut diff, mut max) = (0.0f64, 0.0f64);
+    for (a, b) in a.layers.iter().zip(&b.layers) {
+        for (x, y) in [
+            (&a.rgb, &b.rgb),
+            (&a.alpha, &b.alpha),
+            (&a.disparity, &b.disparity),
+        ] {
+            for (p, q) in x.data.iter().zip(&y.data) {
+                diff = diff.max((*p as f64 - *q as f64).abs());
+                max = max.max((*p as f64).abs());
+            }
+        }
+    }
+    (diff, max)
 }

@@ -71,7 +71,7 @@ mod receivers;
 mod refine;
 mod sources;
 pub(in crate::engine) use refine::REFINE_WEIGHT_BELOW;
-pub(in crate::engine) use sources::{pass_sources, source_run, SourceTerms};
+pub(in crate::engine) use sources::{gather_source_terms, pass_sources, source_run, SourceTerms};
 
 use crate::engine::backward::{self, LayerPartials};
 use crate::engine::fast::forward::render_recording;

@@ -6,6 +6,7 @@
 //! zero-alpha source needs only `sum gc S O`, its alpha gradient).
 
 use super::context::{Ctx, Receivers};
+use super::SourceGradients;
 use crate::engine::fast::runs::{centre_scatter, for_each_lane, lane_sum, CHUNK, LANES};
 use crate::engine::fast::tiles::{backward_reach, TILE, TILE_ROWS};
 use crate::engine::simd::avx2_dispatch;
@@ -27,7 +28,17 @@ pub(in crate::engine) fn pass_sources<T: Real>(
         .into_par_iter()
         .map(|y0| sources_tile_row_dispatch(ctx, &occluding, y0))
         .collect();
-    let n = ctx.rcv.width * ctx.rcv.height;
+    gather_source_terms(tiles, &src.source, ctx.rcv.width * ctx.rcv.height)
+}
+
+/// Adds per-source terms `[dIlin (3), da, dd]`, produced in source order in chunks (each
+/// with its share of K's gradient), onto the image pixels `source[p]` they belong to
+/// (padded sources fold onto their mirrored pixel), in that fixed order: deterministic.
+pub(in crate::engine) fn gather_source_terms<T: Real>(
+    chunks: Vec<(Vec<[T; 5]>, f64)>,
+    source: &[usize],
+    n: usize,
+) -> SourceGradients<T> {
     let (mut g_lin, mut g_a, mut g_d) = (
         vec![[T::zero(); 3]; n],
         vec![T::zero(); n],
@@ -35,10 +46,10 @@ pub(in crate::engine) fn pass_sources<T: Real>(
     );
     let mut k_total = 0.0;
     let mut p = 0;
-    for (tile, k) in tiles {
+    for (chunk, k) in chunks {
         k_total += k;
-        for v in tile {
-            let s = src.source[p];
+        for v in chunk {
+            let s = source[p];
             for c in 0..3 {
                 g_lin[s][c] = g_lin[s][c] + v[c];
             }

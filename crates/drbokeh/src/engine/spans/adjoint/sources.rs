@@ -20,7 +20,9 @@
 //! gradient), the runs' alpha-only variant.
 
 use super::super::geometry::{disc_row, GaugeTable, Rings, Shape, STEP_ARGUMENT_MIN, TABLE_MARGIN};
-use crate::engine::fast::adjoint::{source_run, Ctx, SourceGradients, SourceTerms};
+use crate::engine::fast::adjoint::{
+    gather_source_terms, source_run, Ctx, SourceGradients, SourceTerms,
+};
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, SCATTER_TAIL_PX};
 use crate::Real;
@@ -164,27 +166,7 @@ pub(super) fn pass_sources<T: Real>(
         .into_par_iter()
         .map(|py| source_row_dispatch(ctx, shape, table, span_rows, &data, py))
         .collect();
-    let n = w * h;
-    let (mut g_lin, mut g_a, mut g_d) = (
-        vec![[T::zero(); 3]; n],
-        vec![T::zero(); n],
-        vec![T::zero(); n],
-    );
-    let mut k_total = 0.0;
-    let mut p = 0;
-    for (row, k) in rows {
-        k_total += k;
-        for v in row {
-            let s = src.source[p];
-            for c in 0..3 {
-                g_lin[s][c] = g_lin[s][c] + v[c];
-            }
-            g_a[s] = g_a[s] + v[3];
-            g_d[s] = g_d[s] + v[4];
-            p += 1;
-        }
-    }
-    (g_lin, g_a, g_d, k_total)
+    gather_source_terms(rows, &src.source, w * h)
 }
 
 avx2_dispatch!(
