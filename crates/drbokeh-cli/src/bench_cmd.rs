@@ -16,9 +16,10 @@ use std::path::PathBuf;
 /// fast engine against the plain multi-threaded engine (and the single-threaded reference on
 /// the demo), in one run. Prints time, time per pixel and layer, work, speed-ups and the
 /// largest differences to the fast engine (display-encoded and in linear light).
-/// Then the adjoint at 512x512, 2 layers, K 30, L 71: fast forward, fast forward with tape,
-/// fast backward and backward/forward ratio; without --quick also the exact threaded
-/// adjoint (about a minute on 2 cores) and the largest gradient difference to it.
+/// Then the adjoint at 512x512, 2 layers, K 30, L 71: forward, forward with tape, backward
+/// and backward/forward ratio for the fast adjoint and for auto's span adjoint, with the
+/// largest gradient difference between them; without --quick also the exact threaded
+/// adjoint (about a minute on 2 cores) and the fast one's largest difference to it.
 /// --json writes {"rows": [...], "adjoint": {...}}.
 ///
 /// Examples:
