@@ -56,27 +56,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 3
             };
-            let mut seen = vec![false; w * h];
-            for s in 0..w * h {
-                if seen[s] || !clip[s] {
-                    continue;
-                }
-                let mut reg = vec![];
-                let mut st = vec![s];
-                seen[s] = true;
-                while let Some(i) = st.pop() {
-                    reg.push(i);
-                    let (x, y) = (i % w, i / w);
-                    for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                        for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                            let j = ny * w + nx;
-                            if !seen[j] && clip[j] {
-                                seen[j] = true;
-                                st.push(j);
-                            }
-                        }
-                    }
-                }
+            for reg in drbokeh::highlight::regions(w, h, |i| clip[i]) {
                 let rad = scene.blur_k * (scene.disparity.data[reg[0]] as f64 - scene.focus).abs();
                 if rad < 1.0 {
                     continue;

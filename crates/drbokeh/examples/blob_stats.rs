@@ -18,27 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .chunks_exact(3)
                 .map(|p| p.iter().cloned().fold(0.0, f64::max))
                 .collect();
-            let mut seen = vec![false; w * h];
-            for s in 0..w * h {
-                if seen[s] || v[s] < t0 {
-                    continue;
-                }
-                let mut reg = vec![];
-                let mut st = vec![s];
-                seen[s] = true;
-                while let Some(i) = st.pop() {
-                    reg.push(i);
-                    let (x, y) = (i % w, i / w);
-                    for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                        for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                            let j = ny * w + nx;
-                            if !seen[j] && v[j] >= t0 {
-                                seen[j] = true;
-                                st.push(j);
-                            }
-                        }
-                    }
-                }
+            for reg in drbokeh::highlight::regions(w, h, |i| v[i] >= t0) {
                 let nclip = reg.iter().filter(|&&i| v[i] >= 254.5 / 255.0).count();
                 if nclip == 0 {
                     continue;

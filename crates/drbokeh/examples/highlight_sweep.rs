@@ -132,27 +132,7 @@ fn oracle(
         None => (mode, false),
     };
     let mut out = png.clone();
-    let mut seen = vec![false; w * h];
-    for s in 0..w * h {
-        if !clipped[s] || seen[s] {
-            continue;
-        }
-        let mut reg = vec![];
-        let mut st = vec![s];
-        seen[s] = true;
-        while let Some(i) = st.pop() {
-            reg.push(i);
-            let (x, y) = (i % w, i / w);
-            for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                    let j = ny * w + nx;
-                    if clipped[j] && !seen[j] {
-                        seen[j] = true;
-                        st.push(j);
-                    }
-                }
-            }
-        }
+    for reg in drbokeh::highlight::regions(w, h, |i| clipped[i]) {
         let mut m = [0.0f64; 3];
         for &i in &reg {
             for c in 0..3 {

@@ -527,6 +527,39 @@ fn check_inputs<T: Real>(rgb_encoded: &Image<T>, disparity: &Image<T>) -> Result
     Ok(())
 }
 
+/// The 8-connected regions of the `w` x `h` pixels for which `inside(index)` holds, each
+/// as its pixel indices (row-major), in the order of their first pixel; each region's
+/// pixels in flood order from that pixel (a fixed order, so sums over a region are
+/// deterministic).
+pub fn regions(w: usize, h: usize, inside: impl Fn(usize) -> bool) -> Vec<Vec<usize>> {
+    let mut seen = vec![false; w * h];
+    let mut stack = Vec::new();
+    let mut out = Vec::new();
+    for start in 0..w * h {
+        if seen[start] || !inside(start) {
+            continue;
+        }
+        let mut region = Vec::new();
+        seen[start] = true;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            region.push(i);
+            let (x, y) = (i % w, i / w);
+            for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    let j = ny * w + nx;
+                    if !seen[j] && inside(j) {
+                        seen[j] = true;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        out.push(region);
+    }
+    out
+}
+
 /// Finds the clipped regions of `rgb_encoded` (threshold `t0`) and scales each pixel's
 /// linear colour by `g` (tint `None`) or towards `g tint` (per channel, never below the
 /// photo's), with `(g, tint)` from `gain_of(region, value)`, ramped by `s(t)` and the
@@ -549,30 +582,7 @@ fn recover_regions<T: Real>(
         .chunks_exact(3)
         .map(|p| p.iter().map(|v| v.f64()).fold(f64::NEG_INFINITY, f64::max))
         .collect();
-    let mut seen = vec![false; w * h];
-    let mut stack = Vec::new();
-    let mut region = Vec::new();
-    for start in 0..w * h {
-        if seen[start] || value[start].is_nan() || value[start] < t0 {
-            continue;
-        }
-        // Flood the 8-connected bright region holding `start`.
-        region.clear();
-        seen[start] = true;
-        stack.push(start);
-        while let Some(i) = stack.pop() {
-            region.push(i);
-            let (x, y) = (i % w, i / w);
-            for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                    let j = ny * w + nx;
-                    if !seen[j] && value[j] >= t0 {
-                        seen[j] = true;
-                        stack.push(j);
-                    }
-                }
-            }
-        }
+    for region in regions(w, h, |i| value[i] >= t0) {
         if !region.iter().any(|&i| value[i] >= CLIPPED_LEVEL) {
             continue;
         }
@@ -668,6 +678,24 @@ pub fn point_area_px(width: usize, height: usize) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn regions_are_8_connected_in_first_pixel_order() {
+        // 4 x 3:  # . . #
+        //         . # . #
+        //         . . . .
+        let on = [0, 5, 3, 7];
+        let r = regions(4, 3, |i| on.contains(&i));
+        // 0 and 5 touch diagonally; 3 and 7 vertically.
+        assert_eq!(r.len(), 2);
+        let mut a = r[0].clone();
+        a.sort_unstable();
+        let mut b = r[1].clone();
+        b.sort_unstable();
+        assert_eq!((a, b), (vec![0, 5], vec![3, 7]));
+        assert_eq!(r[0][0], 0, "a region starts at its first pixel");
+        assert!(regions(0, 0, |_| true).is_empty());
+    }
     use crate::model::Transfer;
 
     fn tone() -> Tone {
