@@ -110,6 +110,29 @@ pub(crate) fn render_recording<T: Real>(
     choice: Choice,
     record: bool,
 ) -> (Image<T>, SpanStats, Option<SpanRecording<T>>) {
+    render_recording_to(stack, settings, progress, choice, record, None)
+}
+
+/// [`render_recording`] with the span band-layers' rings reaching `r + outer_px` instead
+/// of the forward's `r + u_out` (`None`: the forward's). The band-layers' choice of spans
+/// or taps is the forward's either way (it does not depend on the ring). With
+/// `Some(outer_px)` the output is not the span render's bytes: only its recording is used
+/// (the span adjoint's sums out to the backward's reach, `adjoint/mod.rs`).
+pub(crate) fn render_recording_to<T: Real>(
+    stack: &LayerStack<T>,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    choice: Choice,
+    record: bool,
+    outer_px: Option<f64>,
+) -> (Image<T>, SpanStats, Option<SpanRecording<T>>) {
+    let rings = {
+        let forward = Rings::of(settings.model().step);
+        Rings {
+            inner_px: forward.inner_px,
+            outer_px: outer_px.unwrap_or(forward.outer_px),
+        }
+    };
     let (w, h) = (stack.width, stack.height);
     let tables = WindowTables::<T>::new(settings);
     let big_r = tables.big_r;
@@ -194,7 +217,7 @@ pub(crate) fn render_recording<T: Real>(
                     width: w,
                     rows,
                     shape,
-                    rings: Rings::of(options.step),
+                    rings,
                     table,
                     nodes: nodes.as_ref(),
                     coverage: &coverage,

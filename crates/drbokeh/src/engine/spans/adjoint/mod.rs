@@ -32,15 +32,22 @@
 //!    the forward's in-focus interpolation (error `<= 1e-6` per tap in `O`) is not
 //!    differentiated, so the backward is the exact one's within `1e-6` there.
 //!
-//! **Soft disc** (preset `physical`). With the span forward's recorded sums, a layer that
-//! ends (partial alpha next to exact zeros, `tests/spans_adjoint.rs`, "blobs") got alpha
-//! gradients 1.8e-2 of their largest value off the exact ones (with the fast forward's
-//! sums and the same span pass B: within 2e-5), from receivers outside the layer's edge
-//! whose `B` differs between the two records (measured: up to 0.12 where `W ~ 1e-12`);
-//! not yet explained. So for the soft disc the tape records the sums with the fast
-//! forward (an extra forward pass; the output stays the span render); the box coverage
-//! (preset `paper`) uses the span forward's. The soft disc's own sums and its pass C are
-//! spans ([`disc`]: O(r) per receiver).
+//! **Recorded sums** (preset `physical`'s sharp step). The span forward's sharp ring ends at
+//! `r + 2.75` (`S <= 6.8e-8` per tap), the fast tape's sums reach the backward's `r + 6`.
+//! The render cannot see the difference, but the chain rule can: the display transfer's
+//! derivative is evaluated at the composite of the recorded sums, and for a dark channel
+//! of a layer colour (`B ~ 1e-6`, the back layer's black stripes in the "blobs" scene of
+//! `tests/spans_adjoint.rs`) the dropped tail is about 1 % of `B`; `gamma`'s
+//! `d/dx x^(1/g - 1)` has relative sensitivity `1 - 1/g = 0.55`, so `dL/dlinear` was
+//! 0.5 % off there, and the front layer's `dL/dC = o / (W + 1e-8)`, large at its edge,
+//! carried that into the coverage share and the alpha gradient: 1.8e-2 of its largest
+//! value (measured; every recorded `W`, `B`, `o` of the two tapes agreed after the
+//! refinement of small weights to within 1e-6, except for that tail). So for the sharp
+//! step the tape's sums come from a second span forward whose rings reach `r + 6`
+//! ([`super::render_recording_to`]; its output is discarded, the tape's output is the
+//! span render): O(r) per source like the forward, where this used to be a fast (O(r^2))
+//! forward. The paper step's ring already ends at the render's `r + 4.5`. The soft disc's
+//! own sums and its pass C are spans ([`disc`]: O(r) per receiver).
 //!
 //! **Speed** (`drbokeh vjp`, whole process, demo scene, f32, 2 shared cores, load 8-13,
 //! CPU seconds of one run each, span adjoint / fast adjoint): 512 px K 30 paper 3.7 / 5.6,
@@ -58,9 +65,8 @@ mod disc;
 mod sources;
 
 use super::geometry::{GaugeTable, Shape};
-use super::{render_recording, Choice};
+use super::{render_recording, render_recording_to, Choice};
 use crate::engine::backward::fold_padded;
-use crate::engine::fast;
 use crate::engine::fast::adjoint::{
     backward_with, pass_sources, Ctx, SoftDiscHooks, REFINE_WEIGHT_BELOW,
 };
@@ -68,7 +74,7 @@ use crate::engine::fast::tiles::WindowTables;
 use crate::engine::planes::Planes;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
-use crate::model::{Coverage, LayerAtPixel};
+use crate::model::{Coverage, LayerAtPixel, ScatterStep};
 use crate::presets::RenderSettings;
 use crate::progress::{NoProgress, Progress};
 use crate::stack::LayerStack;
@@ -95,14 +101,23 @@ pub(crate) fn render_with_tape<T: Real>(
 ) -> (Image<T>, SpanTape<T>) {
     let (img, _, rec) = render_recording(stack, settings, progress, choice, true);
     let rec = rec.unwrap_or_else(|| unreachable!("render_recording records when asked"));
-    // The soft-disc coverage (preset physical): the sums are recorded by the fast forward
-    // (see the module documentation, "Soft disc").
-    let saved = if settings.model().coverage == Coverage::SoftDisc {
-        fast::adjoint::render_with_tape(stack, settings, &NoProgress)
-            .1
+    // The sharp step: the sums out to the backward's reach (see the module documentation,
+    // "Recorded sums"), from a second span forward whose output is not used.
+    let saved = match settings.model().step {
+        ScatterStep::Sharp => {
+            render_recording_to(
+                stack,
+                settings,
+                &NoProgress,
+                choice,
+                true,
+                Some(sources::TAP_ROW_TAIL_PX),
+            )
+            .2
+            .unwrap_or_else(|| unreachable!("render_recording_to records when asked"))
             .saved
-    } else {
-        rec.saved
+        }
+        ScatterStep::Paper => rec.saved,
     };
     (
         img,

@@ -34,7 +34,7 @@ const COMPONENTS: usize = 4;
 /// How far beyond `r` pass B reaches (in gauge units) on tap rows, and for tail receivers
 /// on span rows: the fast adjoint's `r + 4.5 + 1.5` (`engine/fast/tiles.rs`,
 /// `backward_reach`).
-const TAP_ROW_TAIL_PX: f64 = SCATTER_TAIL_PX + 1.5;
+pub(super) const TAP_ROW_TAIL_PX: f64 = SCATTER_TAIL_PX + 1.5;
 
 /// A sparse set of receivers per image row: prefix counts (`w + 1` per row) and columns.
 struct RowSet {
