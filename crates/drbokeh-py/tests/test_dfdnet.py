@@ -238,6 +238,15 @@ def test_drbokeh_layer_renders_one_opaque_layer():
     assert np.abs(got - want).max() < 1e-6
 
 
+def test_quantised_disparity_has_levels_over_its_range():
+    ramp = np.linspace(0.2, 0.6, 9, dtype=np.float32)[None].repeat(3, 0)
+    q = layers.quantised(ramp, 3)
+    assert sorted(set(np.round(q.ravel(), 6))) == pytest.approx([0.2, 0.4, 0.6])
+    assert np.abs(q - ramp).max() <= 0.1 + 1e-6
+    flat = np.full((4, 4), 0.3, np.float32) + np.linspace(0, 0.01, 16, dtype=np.float32).reshape(4, 4)
+    assert np.array_equal(layers.quantised(flat, 3), flat)  # range below 0.05: unchanged
+
+
 def test_occlusion_layer_is_one_layer_at_a_constant_and_cuts_at_a_step():
     """``physical3``: at a constant disparity the stack is one opaque layer (the same render
     as ``physical``); at a disparity step (a near square over a textured far background)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Dict, List, Tuple
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -143,14 +144,26 @@ def drbokeh_layer(preset: str, threads: int = 1) -> Layer:
     return render
 
 
+def quantised(disparity: np.ndarray, levels: int, min_range: float = 0.05) -> np.ndarray:
+    """The disparity rounded to ``levels`` equally spaced values over its own range (a
+    range below ``min_range``: returned as is). A network's prediction changes smoothly
+    across an object's edge, so the decomposition (which cuts where neighbours jump)
+    would find no cut in it; rounded, every change of level is a jump."""
+    lo, hi = float(disparity.min()), float(disparity.max())
+    if hi - lo < min_range or levels < 2:
+        return np.ascontiguousarray(disparity, dtype=np.float32)
+    q = np.round((disparity - lo) / (hi - lo) * (levels - 1)) / (levels - 1)
+    return np.ascontiguousarray(lo + q * (hi - lo), dtype=np.float32)
+
+
 def occlusion_stack(
     source: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor, max_layers: int
 ) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The layer stack of the prediction, as ``drbokeh dfd --occlusion-layers`` builds it:
     per item, :func:`drbokeh.decompose` of the layer input clipped to [0, 1] (the
     highlight-corrected source differs from the photo only on clipped pixels) at the
-    *detached* predicted disparity (depth layers cut at disparity jumps, each filled in
-    behind the nearer ones), padded with empty layers to ``max_layers``. Each pixel is
+    *detached* predicted disparity rounded to ``max_layers`` levels (:func:`quantised`;
+    depth layers cut at its jumps, each filled in behind the nearer ones), padded with empty layers to ``max_layers``. Each pixel is
     owned by the front-most layer that covers it (alpha > 1/2); there the layer takes the
     input's colour and the prediction's disparity (with its gradient); elsewhere the
     decomposition's fills, held fixed (their dependence on the disparity is not
@@ -165,9 +178,7 @@ def occlusion_stack(
     img = source.detach().clamp(0.0, 1.0).permute(0, 2, 3, 1).contiguous().numpy()
     disp = disparity.detach().clamp(0.0, 1.0)[:, 0].contiguous().numpy()
     for i in range(b):
-        dec = _native.decompose(
-            img[i], disp[i], max_layers=max_layers, focus=float(focus[i]), blur=float(blur[i]), threads=1
-        )
+        dec = _native.decompose(img[i], quantised(disp[i], max_layers), max_layers=max_layers, threads=1)
         n = dec["alpha"].shape[0]
         rgb[i, :n] = torch.from_numpy(dec["rgb"]).to(source.dtype)
         alpha[i, :n] = torch.from_numpy(dec["alpha"]).to(source.dtype)
