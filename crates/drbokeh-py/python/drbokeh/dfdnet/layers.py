@@ -6,6 +6,9 @@ the display-encoded defocused image ``(B, 3, H, W)``.
 
 - ``drbokeh-physical``, ``drbokeh-paper``: one opaque layer through
   :func:`drbokeh.torch.render` (the Rust renderer and its exact adjoint).
+- ``physical3``, ``paper3``: the same through the prediction's layer stack (up to 3
+  depth layers, :func:`occlusion_stack`), so a blurred nearer object shows the filled-in
+  background behind it.
 - ``gausspsf``: GaussPSF (Gur & Wolf 2019) as ``crates/drbokeh/src/baselines/gauss_psf.rs``:
   each source pixel spreads a Gaussian of ``sigma = sqrt((K d / 2)^2 + 1/4)``, gathered and
   normalised over in-image sources, ``out(x) = sum_y w I(y) / sum_y w``,
