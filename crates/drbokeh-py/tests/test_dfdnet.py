@@ -238,6 +238,47 @@ def test_drbokeh_layer_renders_one_opaque_layer():
     assert np.abs(got - want).max() < 1e-6
 
 
+def test_quantised_disparity_has_levels_over_its_range():
+    ramp = np.linspace(0.2, 0.6, 9, dtype=np.float32)[None].repeat(3, 0)
+    q = layers.quantised(ramp, 3)
+    assert sorted(set(np.round(q.ravel(), 6))) == pytest.approx([0.2, 0.4, 0.6])
+    assert np.abs(q - ramp).max() <= 0.1 + 1e-6
+    flat = np.full((4, 4), 0.3, np.float32) + np.linspace(0, 0.01, 16, dtype=np.float32).reshape(4, 4)
+    assert np.array_equal(layers.quantised(flat, 3), flat)  # range below 0.05: unchanged
+
+
+def test_occlusion_layer_is_one_layer_at_a_constant_and_cuts_at_a_step():
+    """``physical3``: at a constant disparity the stack is one opaque layer (the same render
+    as ``physical``); at a disparity step (a near square over a textured far background)
+    the near square is its own front layer, owned pixels carry the prediction's disparity
+    and colour, the back layer is filled in behind the square, and the disparity gradient
+    flows (finite, nonzero) on both sides of the edge."""
+    rng = np.random.default_rng(5)
+    aif = torch.from_numpy(rng.random((1, 3, 32, 32)).astype(np.float32) * 0.8 + 0.1)
+    f, k = torch.tensor([0.0]), torch.tensor([4.0])
+    const = torch.full((1, 1, 32, 32), 0.3)
+    one = layers.make_layer("physical")(aif, const, f, k)
+    stacked = layers.make_layer("physical3")(aif, const, f, k)
+    assert torch.abs(one - stacked).max() < 1e-6
+    step = torch.full((1, 1, 32, 32), 0.1)
+    step[..., 10:22, 10:22] = 0.8
+    rgb, alpha, disp = layers.occlusion_stack(aif, step, f, k, 3)
+    assert rgb.shape == (1, 3, 32, 32, 3) and alpha.shape == disp.shape == (1, 3, 32, 32)
+    assert torch.all(alpha[0, 0, 10:22, 10:22] > 0.5) and torch.all(alpha[0, 0, :5, :5] < 0.5)
+    assert torch.allclose(disp[0, 0, 10:22, 10:22], step[0, 0, 10:22, 10:22])
+    back = int((alpha[0].amax((1, 2)) > 0.5).nonzero().max())
+    assert back > 0 and torch.all(alpha[0, back] > 0.5)  # the farthest layer covers everything
+    assert torch.allclose(rgb[0, 0, 10:22, 10:22], aif[0].permute(1, 2, 0)[10:22, 10:22])
+    assert torch.allclose(disp[0, back, :5, :5], step[0, 0, :5, :5])
+    d = step.clone().requires_grad_(True)
+    out = layers.make_layer("physical3")(aif, d, f, k)
+    target = layers.make_layer("physical")(aif, torch.where(step > 0.5, step, 0.3), f, k)
+    (g,) = torch.autograd.grad((out - target).abs().mean(), d)
+    assert torch.isfinite(g).all()
+    assert g[0, 0, 10:22, 10:22].abs().sum() > 0
+    assert g[0, 0, 2:9, 2:9].sum() < 0  # the far side is pushed up, towards the target's 0.3
+
+
 # ---- the quick training run -----------------------------------------------------------------
 
 

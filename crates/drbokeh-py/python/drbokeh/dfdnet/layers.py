@@ -6,6 +6,9 @@ the display-encoded defocused image ``(B, 3, H, W)``.
 
 - ``drbokeh-physical``, ``drbokeh-paper``: one opaque layer through
   :func:`drbokeh.torch.render` (the Rust renderer and its exact adjoint).
+- ``physical3``, ``paper3``: the same through the prediction's layer stack (up to 3
+  depth layers, :func:`occlusion_stack`), so a blurred nearer object shows the filled-in
+  background behind it.
 - ``gausspsf``: GaussPSF (Gur & Wolf 2019) as ``crates/drbokeh/src/baselines/gauss_psf.rs``:
   each source pixel spreads a Gaussian of ``sigma = sqrt((K d / 2)^2 + 1/4)``, gathered and
   normalised over in-image sources, ``out(x) = sum_y w I(y) / sum_y w``,
@@ -26,6 +29,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Dict, List, Tuple
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -143,7 +147,71 @@ def drbokeh_layer(preset: str, threads: int = 1) -> Layer:
     return render
 
 
-LAYERS = ("physical", "paper", "gausspsf", "aperture")
+def quantised(disparity: np.ndarray, levels: int, min_range: float = 0.05) -> np.ndarray:
+    """The disparity rounded to ``levels`` equally spaced values over its own range (a
+    range below ``min_range``: returned as is). A network's prediction changes smoothly
+    across an object's edge, so the decomposition (which cuts where neighbours jump)
+    would find no cut in it; rounded, every change of level is a jump."""
+    lo, hi = float(disparity.min()), float(disparity.max())
+    if hi - lo < min_range or levels < 2:
+        return np.ascontiguousarray(disparity, dtype=np.float32)
+    q = np.round((disparity - lo) / (hi - lo) * (levels - 1)) / (levels - 1)
+    return np.ascontiguousarray(lo + q * (hi - lo), dtype=np.float32)
+
+
+def occlusion_stack(
+    source: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor, max_layers: int
+) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The layer stack of the prediction, as ``drbokeh dfd --occlusion-layers`` builds it:
+    per item, :func:`drbokeh.decompose` of the layer input clipped to [0, 1] (the
+    highlight-corrected source differs from the photo only on clipped pixels) at the
+    *detached* predicted disparity rounded to ``max_layers`` levels (:func:`quantised`;
+    depth layers cut at its jumps, each filled in behind the nearer ones), padded with empty layers to ``max_layers``. Each pixel is
+    owned by the front-most layer that covers it (alpha > 1/2); there the layer takes the
+    input's colour and the prediction's disparity (with its gradient); elsewhere the
+    decomposition's fills, held fixed (their dependence on the disparity is not
+    differentiated). Returns ``rgb (B, N, H, W, 3)``, ``alpha (B, N, H, W)``,
+    ``disparity (B, N, H, W)``."""
+    from .. import _native
+
+    b, _, h, w = source.shape
+    rgb = torch.zeros(b, max_layers, h, w, 3, dtype=source.dtype)
+    alpha = torch.zeros(b, max_layers, h, w, dtype=source.dtype)
+    fill = torch.zeros(b, max_layers, h, w, dtype=source.dtype)
+    img = source.detach().clamp(0.0, 1.0).permute(0, 2, 3, 1).contiguous().numpy()
+    disp = disparity.detach().clamp(0.0, 1.0)[:, 0].contiguous().numpy()
+    for i in range(b):
+        dec = _native.decompose(img[i], quantised(disp[i], max_layers), max_layers=max_layers, threads=1)
+        n = dec["alpha"].shape[0]
+        rgb[i, :n] = torch.from_numpy(dec["rgb"]).to(source.dtype)
+        alpha[i, :n] = torch.from_numpy(dec["alpha"]).to(source.dtype)
+        fill[i, :n] = torch.from_numpy(dec["disparity"]).to(source.dtype)
+    covers = (alpha > 0.5).to(torch.int32)
+    owner = (covers > 0) & (torch.cumsum(covers, 1) - covers == 0)  # covers, no nearer layer does
+    src = source.permute(0, 2, 3, 1).unsqueeze(1).expand_as(rgb)
+    rgb = torch.where(owner.unsqueeze(-1), src, rgb)
+    layer_disp = torch.where(owner, disparity.clamp(0.0, 1.0).expand_as(fill), fill)
+    return rgb, alpha, layer_disp
+
+
+def drbokeh_occlusion_layer(preset: str, max_layers: int, threads: int = 1) -> Layer:
+    """The drbokeh layer through the prediction's layer stack (:func:`occlusion_stack`)
+    instead of one opaque layer: behind a blurred nearer object the render shows the
+    filled-in farther layer, as the lens does."""
+    from .. import torch as dbt
+
+    def render(source: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor) -> torch.Tensor:
+        rgb, alpha, disp = occlusion_stack(source, disparity, focus, blur, max_layers)
+        out = dbt.render(
+            rgb, alpha, disp, focus.to(source.dtype), blur.to(source.dtype),
+            preset=preset, gamma=GAMMA, threads=threads,
+        )
+        return out.permute(0, 3, 1, 2)
+
+    return render
+
+
+LAYERS = ("physical", "paper", "gausspsf", "aperture", "physical3", "paper3")
 
 
 def make_layer(name: str, threads: int = 1) -> Layer:
@@ -152,6 +220,9 @@ def make_layer(name: str, threads: int = 1) -> Layer:
         "paper": lambda: drbokeh_layer("paper", threads),
         "gausspsf": lambda: gausspsf,
         "aperture": lambda: aperture,
+        # the drbokeh layers through the prediction's layer stack (at most 3 depth layers)
+        "physical3": lambda: drbokeh_occlusion_layer("physical", 3, threads),
+        "paper3": lambda: drbokeh_occlusion_layer("paper", 3, threads),
     }
     if name not in table:
         raise ValueError(f"unknown layer {name!r} (available: {', '.join(LAYERS)})")

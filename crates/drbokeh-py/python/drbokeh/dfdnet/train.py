@@ -45,7 +45,8 @@ class RunSpec:
         return cfg if self.highlights is None else replace(cfg, highlights=self.highlights)
 
 
-# The table: the four layers with L1+G+HSSIM, the loss ablation through `physical` (the
+# The table: the four layers with L1+G+HSSIM, `physical` through the prediction's layer
+# stack (`physical3`, session 5), the loss ablation through `physical` (the
 # structure terms), and the supervised upper bound. (The highlight ablation of session 3,
 # `physical-hssim-none`, and the L1+G baselines `gausspsf-l1g`, `aperture-l1g` are still
 # available through --runs.)
@@ -54,6 +55,7 @@ TABLE_RUNS: List[RunSpec] = [
     RunSpec("gausspsf", "hssim"),
     RunSpec("aperture", "hssim"),
     RunSpec("paper", "hssim"),
+    RunSpec("physical3", "hssim"),
     RunSpec("physical", "ssim"),
     RunSpec("physical", "l1g"),
     RunSpec("supervised"),
