@@ -17,9 +17,13 @@
 //!    `1 + (g - 1) s(t)`, with `t = (v - T) / (1 - T)` and the smoothstep
 //!    `s(t) = t^2 (3 - 2t)`: the full gain on clipped pixels, none at the threshold, so the
 //!    region's rim stays continuous with its surroundings. The colour's hue is kept.
-//! 5. The gain is faded in with the pixel's blur radius `K |disp - f|` ([`defocus_gate`]):
-//!    none below 1 px, all from 3 px. An in-focus highlight renders as the photo shows it
+//! 5. The gain is faded in with the blur radius `K |disp - f|` ([`defocus_gate`]): none
+//!    below 1 px, all from 3 px. An in-focus highlight renders as the photo shows it
 //!    (clipped, like the camera's), and its extra light cannot leak into its neighbours.
+//!    The radius is the smaller of the pixel's and the region's *source* radius, the least
+//!    blurred of its clipped pixels ([`source_radius_px`]): a clipped source seen in focus
+//!    past a blurred foreground's edge gives no gain to the mixed edge pixels that the depth
+//!    map puts on the foreground (they would spread its light into a bright ring).
 //!
 //! The result is display-encoded again with the same transfer and may exceed 1; the
 //! renderer linearises it back to the recovered light. Recovery is a fixed preprocessing of
@@ -588,6 +592,8 @@ fn recover_regions<T: Real>(
         }
         let (g_region, tint) = gain_of(&region, &value);
         let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
+        let radius_of = |j: usize| blur_k * (disparity.data[j].f64() - focus_disparity).abs();
+        let source_radius = source_radius_px(&region, clipped, radius_of);
         for &i in &region {
             let (x, y) = (i % w, i / w);
             let on_edge = clipped(i)
@@ -606,7 +612,7 @@ fn recover_regions<T: Real>(
                 (false, _) => g_region,
             };
             let t = ((value[i] - t0) / (1.0 - t0)).clamp(0.0, 1.0);
-            let radius_px = blur_k * (disparity.data[i].f64() - focus_disparity).abs();
+            let radius_px = radius_of(i).min(source_radius);
             let mut ramp = smoothstep(t) * defocus_gate(radius_px);
             if !clipped(i) {
                 ramp *= profile.rim_ramp;
@@ -627,6 +633,23 @@ fn recover_regions<T: Real>(
             }
         }
     }
+}
+
+/// The blur radius (px) of a clipped region's light source: the smallest `radius_of`
+/// over the region's `clipped` pixels (the region is bright around a clipped core; where
+/// its pixels lie at several depths, the least blurred clipped pixel is taken as the
+/// source, the others as the mixed edge of a nearer, blurred layer). Infinite when no
+/// pixel is clipped.
+pub fn source_radius_px(
+    region: &[usize],
+    clipped: impl Fn(usize) -> bool,
+    radius_of: impl Fn(usize) -> f64,
+) -> f64 {
+    region
+        .iter()
+        .filter(|&&j| clipped(j))
+        .map(|&j| radius_of(j))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// How a region's gain is spread over its pixels ([`recover_regions`]).
@@ -1028,5 +1051,41 @@ mod tests {
         let out = all.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
         assert!((at(&out, 9, 9, 2) - g).abs() < 1e-9);
         assert!(at(&out, 13, 10, 0) > at(&img, 13, 10, 0) + 0.5);
+    }
+
+    #[test]
+    fn gain_follows_the_least_blurred_clipped_pixel_of_the_region() {
+        // Two 4x4 clipped blobs on grey, each with a clipped column on its right that the
+        // depth map puts on a blurred foreground (disparity 1, 30 px of blur): blob A's core
+        // is in focus (disparity 0), blob B's core is defocused (disparity 0.5, 15 px).
+        let (w, h) = (30, 12);
+        let mut img = Image::<f64>::new(w, h, 3);
+        img.data.iter_mut().for_each(|v| *v = 0.3);
+        let mut disp = Image::<f64>::new(w, h, 1);
+        for (x0, core) in [(3, 0.0), (18, 0.5)] {
+            for y in 4..8 {
+                for x in x0..x0 + 5 {
+                    img.data[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&[1.0; 3]);
+                    disp.data[y * w + x] = if x == x0 + 4 { 1.0 } else { core };
+                }
+            }
+        }
+        let r = HighlightRecovery {
+            gain: 5.0,
+            threshold: 0.9,
+        };
+        let out = r.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
+        let lin = |im: &Image<f64>, x: usize, y: usize| tone().linearize(im.data[3 * (y * w + x)]);
+        // A: in-focus source, so neither its core nor its foreground-labelled edge gain.
+        assert_eq!(lin(&out, 4, 5), 1.0);
+        assert_eq!(lin(&out, 7, 5), 1.0);
+        // B: a defocused source, so both gain (20 px area: 1 + 4 * 16 / 20).
+        let g = 1.0 + 4.0 * 16.0 / 20.0;
+        assert!((lin(&out, 19, 5) - g).abs() < 1e-9);
+        assert!((lin(&out, 22, 5) - g).abs() < 1e-9);
+        let clipped = |j: usize| j % 2 == 0;
+        let radius = |j: usize| [4.0, 1.0, 2.0, 0.5][j];
+        assert_eq!(source_radius_px(&[0, 1, 2, 3], clipped, radius), 2.0);
+        assert_eq!(source_radius_px(&[1, 3], clipped, radius), f64::INFINITY);
     }
 }
