@@ -17,9 +17,13 @@
 //!    `1 + (g - 1) s(t)`, with `t = (v - T) / (1 - T)` and the smoothstep
 //!    `s(t) = t^2 (3 - 2t)`: the full gain on clipped pixels, none at the threshold, so the
 //!    region's rim stays continuous with its surroundings. The colour's hue is kept.
-//! 5. The gain is faded in with the pixel's blur radius `K |disp - f|` ([`defocus_gate`]):
-//!    none below 1 px, all from 3 px. An in-focus highlight renders as the photo shows it
+//! 5. The gain is faded in with the blur radius `K |disp - f|` ([`defocus_gate`]): none
+//!    below 1 px, all from 3 px. An in-focus highlight renders as the photo shows it
 //!    (clipped, like the camera's), and its extra light cannot leak into its neighbours.
+//!    The radius is the smaller of the pixel's and the region's *source* radius, the least
+//!    blurred of its clipped pixels at its depth or farther ([`SourceRadii`]): a clipped source seen in focus
+//!    past a blurred foreground's edge gives no gain to the mixed edge pixels that the depth
+//!    map puts on the foreground (they would spread its light into a bright ring).
 //!
 //! The result is display-encoded again with the same transfer and may exceed 1; the
 //! renderer linearises it back to the recovered light. Recovery is a fixed preprocessing of
@@ -588,6 +592,8 @@ fn recover_regions<T: Real>(
         }
         let (g_region, tint) = gain_of(&region, &value);
         let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
+        let radius_of = |j: usize| blur_k * (disparity.data[j].f64() - focus_disparity).abs();
+        let sources = SourceRadii::new(&region, clipped, |j| disparity.data[j].f64(), radius_of);
         for &i in &region {
             let (x, y) = (i % w, i / w);
             let on_edge = clipped(i)
@@ -606,7 +612,7 @@ fn recover_regions<T: Real>(
                 (false, _) => g_region,
             };
             let t = ((value[i] - t0) / (1.0 - t0)).clamp(0.0, 1.0);
-            let radius_px = blur_k * (disparity.data[i].f64() - focus_disparity).abs();
+            let radius_px = radius_of(i).min(sources.behind(disparity.data[i].f64()));
             let mut ramp = smoothstep(t) * defocus_gate(radius_px);
             if !clipped(i) {
                 ramp *= profile.rim_ramp;
@@ -625,6 +631,53 @@ fn recover_regions<T: Real>(
                 };
                 *v = T::c(tone.encode(new).max(0.0));
             }
+        }
+    }
+}
+
+/// The blur radii of a clipped region's light sources by depth: a pixel of the region
+/// carries light from its own surface or from a source behind it, so its *source radius*
+/// is the smallest blur radius of the region's clipped pixels at its disparity or farther
+/// ([`SourceRadii::behind`]). A mixed edge pixel that the depth map puts on a blurred
+/// foreground, around a light in focus behind it, gets the light's (small) radius; a light
+/// behind an in-focus wire keeps its own.
+pub struct SourceRadii {
+    /// `(disparity, smallest radius of the clipped pixels at this disparity or farther)`,
+    /// by increasing disparity (farthest first).
+    by_disparity: Vec<(f64, f64)>,
+}
+
+impl SourceRadii {
+    /// From the region's pixels, which of them are clipped, and each pixel's disparity and
+    /// blur radius (px).
+    pub fn new(
+        region: &[usize],
+        clipped: impl Fn(usize) -> bool,
+        disparity_of: impl Fn(usize) -> f64,
+        radius_of: impl Fn(usize) -> f64,
+    ) -> Self {
+        let mut by_disparity: Vec<(f64, f64)> = region
+            .iter()
+            .filter(|&&j| clipped(j))
+            .map(|&j| (disparity_of(j), radius_of(j)))
+            .collect();
+        by_disparity.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut least = f64::INFINITY;
+        for e in &mut by_disparity {
+            least = least.min(e.1);
+            e.1 = least;
+        }
+        SourceRadii { by_disparity }
+    }
+
+    /// The smallest radius of the clipped pixels at `disparity` or farther (smaller
+    /// disparity); infinite when there is none.
+    pub fn behind(&self, disparity: f64) -> f64 {
+        let n = self.by_disparity.partition_point(|e| e.0 <= disparity);
+        if n == 0 {
+            f64::INFINITY
+        } else {
+            self.by_disparity[n - 1].1
         }
     }
 }
@@ -1028,5 +1081,55 @@ mod tests {
         let out = all.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
         assert!((at(&out, 9, 9, 2) - g).abs() < 1e-9);
         assert!(at(&out, 13, 10, 0) > at(&img, 13, 10, 0) + 0.5);
+    }
+
+    #[test]
+    fn gain_follows_the_least_blurred_clipped_pixel_behind() {
+        // Two 4x4 clipped blobs on grey, each with a clipped column on its right that the
+        // depth map puts on a blurred foreground (disparity 1, 30 px of blur): blob A's core
+        // is in focus (disparity 0), blob B's core is defocused (disparity 0.5, 15 px).
+        // Blob C: a defocused light (disparity -0.5, 15 px) crossed by an in-focus wire
+        // (its middle column, disparity 0) in front of it.
+        let (w, h) = (45, 12);
+        let mut img = Image::<f64>::new(w, h, 3);
+        img.data.iter_mut().for_each(|v| *v = 0.3);
+        let mut disp = Image::<f64>::new(w, h, 1);
+        for (x0, core, col, col_disp) in [(3, 0.0, 4, 1.0), (18, 0.5, 4, 1.0), (33, -0.5, 2, 0.0)] {
+            for y in 4..8 {
+                for x in x0..x0 + 5 {
+                    img.data[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&[1.0; 3]);
+                    disp.data[y * w + x] = if x == x0 + col { col_disp } else { core };
+                }
+            }
+        }
+        let r = HighlightRecovery {
+            gain: 5.0,
+            threshold: 0.9,
+        };
+        let out = r.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
+        let lin = |im: &Image<f64>, x: usize, y: usize| tone().linearize(im.data[3 * (y * w + x)]);
+        // A: in-focus source, so neither its core nor its foreground-labelled edge gain.
+        assert_eq!(lin(&out, 4, 5), 1.0);
+        assert_eq!(lin(&out, 7, 5), 1.0);
+        // B: a defocused source, so both gain (20 px area: 1 + 4 * 16 / 20).
+        let g = 1.0 + 4.0 * 16.0 / 20.0;
+        assert!((lin(&out, 19, 5) - g).abs() < 1e-9);
+        assert!((lin(&out, 22, 5) - g).abs() < 1e-9);
+        // C: the light behind the wire keeps its gain; the wire, in focus, keeps its colour.
+        assert!((lin(&out, 34, 5) - g).abs() < 1e-9);
+        assert!((lin(&out, 36, 5) - 1.0).abs() < 1e-12);
+        // Pixels 0-3 (even ones clipped) at disparities 0.2, 0.9, 0.5, 0.0 with radii 4, 1,
+        // 2, 0.5: behind disparity 0.5 lies pixel 0 (4) and pixel 2 (2).
+        let clipped = |j: usize| j % 2 == 0;
+        let d = |j: usize| [0.2, 0.9, 0.5, 0.0][j];
+        let radius = |j: usize| [4.0, 1.0, 2.0, 0.5][j];
+        let s = SourceRadii::new(&[0, 1, 2, 3], clipped, d, radius);
+        assert_eq!(
+            (s.behind(0.5), s.behind(1.0), s.behind(0.3)),
+            (2.0, 2.0, 4.0)
+        );
+        assert_eq!(s.behind(0.1), f64::INFINITY);
+        let none = SourceRadii::new(&[1, 3], clipped, d, radius);
+        assert_eq!(none.behind(1.0), f64::INFINITY);
     }
 }
