@@ -276,6 +276,85 @@ impl<T: Real> GaugeTable<T> {
     }
 }
 
+/// A circle's ring steps without a transcendental per tap. The step is
+/// `S(u) = 1 / (1 + c e^{-a u})` with `u = r - g` (sharp: `a = 6, c = 1`; paper: `a = 3,
+/// c = 10`), and `c e^{-a (r - g)} = [c e^{a (m - r)}] [e^{a (g - m)}]` for a fixed centre
+/// `m = R / 2`: the first factor is one scalar per source ([`ExpTable::source_factor`]),
+/// the second a table over the window's offsets, both in f64 (no overflow while
+/// `a (R / 2 + 2 LANES + 20) < 700`, else [`ExpTable::new`] gives `None` and the ring takes
+/// [`ring_steps`]). The product is clamped where [`ring_step`] clamps its argument
+/// ([`STEP_ARGUMENT_MIN`]), rounded to `T`, and `S = 1 / (1 + t)` evaluated in `T`: within
+/// 2 ulp of the exact step in f64 products plus `T`'s rounding of `t` and of the quotient
+/// (`3e-7` relative in f32), against [`ring_step`]'s `4e-7` of its polynomial `exp` plus the
+/// rounding of `g` and `r - g` to `T` (up to `6 ulp(R)`, `5e-5` relative at `R = 100`).
+pub struct ExpTable {
+    /// Row length (columns `dx = 0 ..` of each row `|dy| = 0 ..= R`).
+    stride: usize,
+    /// `e^{a (g(dx, dy) - m)}`, 0 outside the window.
+    factor: Vec<f64>,
+    /// `a`, `c` and `m`.
+    rate: f64,
+    scale: f64,
+    centre: f64,
+    /// The clamp of the product, `c e^{-a STEP_ARGUMENT_MIN}`.
+    max: f64,
+}
+
+impl ExpTable {
+    /// The table of a circle window of radius `big_r` for `step` (`None` where f64 would
+    /// overflow).
+    pub fn new(step: ScatterStep, big_r: usize) -> Option<Self> {
+        let (rate, scale) = match step {
+            ScatterStep::Sharp => (6.0, 1.0),
+            ScatterStep::Paper => (3.0, 10.0),
+        };
+        let centre = big_r as f64 / 2.0;
+        if rate * (centre + (2 * LANES) as f64 + 20.0) >= 700.0 {
+            return None;
+        }
+        let stride = big_r + 1 + 2 * LANES;
+        let mut factor = vec![0.0; (big_r + 1) * stride];
+        for dy in 0..=big_r {
+            for dx in 0..stride {
+                let (x, y) = (dx as isize, dy as isize);
+                if model::in_window(-x, -y, big_r) {
+                    let g = ((dx * dx + dy * dy) as f64).sqrt();
+                    factor[dy * stride + dx] = (rate * (g - centre)).exp();
+                }
+            }
+        }
+        Some(ExpTable {
+            stride,
+            factor,
+            rate,
+            scale,
+            centre,
+            max: scale * (-rate * STEP_ARGUMENT_MIN).exp(),
+        })
+    }
+
+    /// A source's factor `c e^{a (m - r)}`.
+    #[inline(always)]
+    pub fn source_factor(&self, r: f64) -> f64 {
+        self.scale * (self.rate * (self.centre - r)).exp()
+    }
+
+    /// The steps of a source with factor `e_r` ([`ExpTable::source_factor`]) at the
+    /// [`LANES`] offsets `(dx0 + l, dy)`, `dx0 >= 0`, times the window mask (0 outside).
+    #[inline(always)]
+    pub fn steps<T: Real>(&self, e_r: f64, dy: isize, dx0: isize) -> [T; LANES] {
+        let at = dy.unsigned_abs() * self.stride + dx0 as usize;
+        let f: &[f64; LANES] = self.factor[at..at + LANES].try_into().expect("LANES");
+        let mut s = [T::zero(); LANES];
+        for l in 0..LANES {
+            let t = T::c((f[l] * e_r).min(self.max));
+            let inside = if f[l] > 0.0 { T::one() } else { T::zero() };
+            s[l] = inside / (T::one() + t);
+        }
+        s
+    }
+}
+
 /// One row of a disc: the interior columns and the ring runs (offsets relative to the
 /// disc's centre column), clipped to the window.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -426,5 +505,41 @@ mod tests {
             let s_min = model::scatter_step(step, STEP_ARGUMENT_MIN) as f32;
             assert!(s_min.is_normal() && s_min < 3e-17, "{step:?}: {s_min}");
         }
+    }
+
+    #[test]
+    fn exp_table_steps_match_the_exact_step() {
+        for step in [ScatterStep::Sharp, ScatterStep::Paper] {
+            for big_r in [5usize, 40, 105] {
+                let table = ExpTable::new(step, big_r).expect("in range");
+                let mut worst: f64 = 0.0;
+                for i in 0..400 {
+                    let r = 0.37 + (i as f64) * (big_r as f64 + 3.0) / 400.0;
+                    let e_r = table.source_factor(r);
+                    for dy in [0isize, 1, 7, (big_r / 2) as isize, big_r as isize] {
+                        for dx0 in (0..=big_r as isize).step_by(3) {
+                            let s32 = table.steps::<f32>(e_r, dy, dx0);
+                            let s64 = table.steps::<f64>(e_r, dy, dx0);
+                            for l in 0..LANES {
+                                let (x, y) = (dx0 + l as isize, dy);
+                                if !model::in_window(-x, -y, big_r) {
+                                    assert_eq!((s32[l], s64[l]), (0.0, 0.0));
+                                    continue;
+                                }
+                                let g = ((x * x + y * y) as f64).sqrt();
+                                let u = (r - g).max(STEP_ARGUMENT_MIN);
+                                let exact = model::scatter_step(step, u);
+                                for got in [s32[l] as f64, s64[l]] {
+                                    worst = worst.max((got - exact).abs() / exact);
+                                }
+                            }
+                        }
+                    }
+                }
+                assert!(worst < 4e-7, "{step:?} R {big_r}: {worst}");
+            }
+        }
+        assert!(ExpTable::new(ScatterStep::Sharp, 170).is_none());
+        assert!(ExpTable::new(ScatterStep::Paper, 170).is_some());
     }
 }

@@ -23,7 +23,10 @@
 //! the common case in layers of constant or row-constant disparity. A run of sources in
 //! adjacent columns sharing a profile whose ring is one chunk on each side is added as
 //! whole vectors (each span write and each ring lane a contiguous multiply-add over the
-//! run), not source by source: the same terms, summed in another fixed order.
+//! run), not source by source: the same terms, summed in another fixed order. A circle's
+//! ring steps come from a table of exponentials over the window times one exponential
+//! per source ([`geometry::ExpTable`]), not from an `exp` per tap: no new approximation
+//! (closer to the exact step than the per-tap `exp`).
 //!
 //! **Approximations and their bounds** (all relative; each tested at its worst case in
 //! `tests/spans.rs`):
@@ -64,7 +67,7 @@ use crate::stack::LayerStack;
 use crate::Real;
 use coverage::{CoverageCtx, DiscGather};
 use focus::{Nodes, FOCUS_CUTOFF};
-use geometry::{GaugeTable, Rings, Shape};
+use geometry::{ExpTable, GaugeTable, Rings, Shape};
 use rayon::prelude::*;
 use scatter::{BandLayer, SUB_ROWS};
 
@@ -147,6 +150,9 @@ pub(crate) fn render_recording_to<T: Real>(
         .map(|_| GaugeTable::<T>::new(&settings.aperture, big_r, -1));
     let gather_table = (shape.is_some() && options.coverage == Coverage::SoftDisc)
         .then(|| GaugeTable::<T>::new(&settings.aperture, big_r, 1));
+    let exp_table = matches!(shape, Some(Shape::Circle))
+        .then(|| ExpTable::new(options.step, big_r))
+        .flatten();
     let mut out = Image::new(w, h, 3);
     type BandRecord<T> = (Vec<Vec<LayerAtPixel<T>>>, Vec<bool>);
     let bands: Vec<(SpanStats, BandRecord<T>)> = out
@@ -219,6 +225,7 @@ pub(crate) fn render_recording_to<T: Real>(
                     shape,
                     rings,
                     table,
+                    exp: exp_table.as_ref(),
                     nodes: nodes.as_ref(),
                     coverage: &coverage,
                 };

@@ -11,7 +11,7 @@
 use super::coverage::CoverageCtx;
 use super::focus::{classify, Nodes, StepClass, FOCUS_CUTOFF, MAX_NODES};
 use super::geometry::{
-    disc_row, floor_sqrt, ring_steps, DiscRow, GaugeTable, Rings, Shape, LANES, MARGIN,
+    disc_row, floor_sqrt, ring_steps, DiscRow, ExpTable, GaugeTable, Rings, Shape, LANES, MARGIN,
 };
 use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
@@ -38,6 +38,8 @@ pub(super) struct BandLayer<'a, T> {
     pub rings: Rings,
     /// Gauges of receiver offsets `x - y`, with the window mask.
     pub table: &'a GaugeTable<T>,
+    /// The circle's ring steps by table ([`ExpTable`]; `None`: by [`ring_steps`]).
+    pub exp: Option<&'a ExpTable>,
     /// Interpolation points for the band's in-focus receivers (`None`: none in the band).
     pub nodes: Option<&'a Nodes>,
     /// The coverage term.
@@ -102,6 +104,8 @@ struct Source<T> {
     inner_sq: f64,
     outer_sq: f64,
     rel_disp: T,
+    /// [`ExpTable::source_factor`] (0 without the table).
+    e_r: f64,
     v: [T; COMPONENTS],
     /// `v` in f64, for the span writes.
     v64: [f64; COMPONENTS],
@@ -252,6 +256,7 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
                 inner_sq: if inner >= 0.0 { inner * inner } else { -1.0 },
                 outer_sq: (rf + rings.outer_px).powi(2),
                 rel_disp: b.rel_disp[i],
+                e_r: ctx.exp.map_or(0.0, |e| e.source_factor(rf)),
                 v,
                 v64: v.map(|c| c.f64()),
             });
@@ -515,7 +520,7 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
         if one_chunk {
             // The common row: [S(k0) .. S(outer_hi), zeros | zeros | the same reversed],
             // the reversed chunk (the left ring) built in registers.
-            let s = ring_steps::<T, SHARP>(ctx.table, src.r, ady, k0);
+            let s = circle_steps::<T, SHARP>(ctx, src, ady, k0);
             let s: [T; LANES] = std::array::from_fn(|l| if l < n { s[l] } else { T::zero() });
             let rev: [T; LANES] = std::array::from_fn(|l| s[LANES - 1 - l]);
             values[next..next + LANES].copy_from_slice(&s);
@@ -534,7 +539,7 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
         }
         let mut k = k0;
         while k <= outer_hi {
-            let s = ring_steps::<T, SHARP>(ctx.table, src.r, ady, k);
+            let s = circle_steps::<T, SHARP>(ctx, src, ady, k);
             let at = next + (k - k0) as usize;
             values[at..at + LANES].copy_from_slice(&s);
             k += lanes;
@@ -761,6 +766,20 @@ fn circle_row<T: Real>(
             right: (hi < ho).then_some((hi + 1, ho)),
         },
     })
+}
+
+/// The ring steps of a circle's disc row `ady` at columns `dx0 ..` (`dx0 >= 0`).
+#[inline(always)]
+fn circle_steps<T: Real, const SHARP: bool>(
+    ctx: &BandLayer<'_, T>,
+    src: &Source<T>,
+    ady: isize,
+    dx0: isize,
+) -> [T; LANES] {
+    match ctx.exp {
+        Some(e) => e.steps(src.e_r, ady, dx0),
+        None => ring_steps::<T, SHARP>(ctx.table, src.r, ady, dx0),
+    }
 }
 
 /// One row `dy` of a source's disc into receiver row `row` of the sub-band (any convex
