@@ -75,6 +75,11 @@ pub struct OptimiserArgs {
     /// in the weighted median falls to exp(-1/2) (default 0.05).
     #[arg(long, value_name = "SIGMA")]
     pub median_sigma: Option<f64>,
+    /// Bins per channel of the colour vote on the result: pixels whose all-in-focus colour
+    /// falls in one of bins^3 cubes take the median disparity of all of them (default 16;
+    /// 0 turns the vote off). A prior that one surface has one palette (docs/dfd.md).
+    #[arg(long, value_name = "N")]
+    pub colour_bins: Option<usize>,
     /// Layers of the occlusion-aware objective of the drbokeh method: the all-in-focus
     /// image is rendered as the layer stack that `render --image --disparity` makes of it
     /// at the current estimate (the hidden background filled in behind nearer layers), at
@@ -126,6 +131,9 @@ impl OptimiserArgs {
                 Some(m) => m.sigma = sigma,
                 None => bail!("invalid parameter --median-sigma: the median refinement is off (--median-radius 0)"),
             }
+        }
+        if let Some(b) = self.colour_bins {
+            o.colour_vote = (b > 0).then_some(b);
         }
         if let Some(n) = self.occlusion_layers {
             o.layered = (n > 1).then(|| LayeredObjective {
