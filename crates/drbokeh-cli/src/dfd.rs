@@ -183,7 +183,10 @@ fn parse_init(s: &str) -> Result<Init> {
 /// Loss: 0.5 L1 + 20 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
 /// started from a plane sweep, at the finest scale a cost budget allows; clipped
 /// highlights of the all-in-focus image are modelled (their lost energy is found in the
-/// defocused image); pixels the defocused image clips are left out. Writes the disparity
+/// defocused image); pixels the defocused image clips are left out. The result is refined
+/// by an edge-aware weighted median and a colour vote (pixels of one colour take their
+/// median disparity: right where each surface has its own colours; --colour-bins 0 if
+/// textures span several depths). Writes the disparity
 /// (near = 1), a confidence map (where the pair carries depth information), a preview and
 /// a JSON log of every iteration and the time per scale.
 ///
