@@ -297,6 +297,7 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "highlight_range" => "--highlight-range",
         "coarse_scales" => "--coarse-scales",
         "edge_sensitivity" => "--edge-sensitivity",
+        "colour_bins" => "--colour-bins",
         "fine_iterations" => "--fine-iterations",
         "finest_scale" => "--finest-scale",
         "highlights" => "--clipped",

@@ -75,6 +75,11 @@ pub struct OptimiserArgs {
     /// in the weighted median falls to exp(-1/2) (default 0.05).
     #[arg(long, value_name = "SIGMA")]
     pub median_sigma: Option<f64>,
+    /// Bins per channel of the colour vote on the result: pixels whose all-in-focus colour
+    /// falls in one of bins^3 cubes take the median disparity of all of them (default 16;
+    /// 0 turns the vote off). A prior that one surface has one palette (docs/dfd.md).
+    #[arg(long, value_name = "N")]
+    pub colour_bins: Option<usize>,
     /// Layers of the occlusion-aware objective of the drbokeh method: the all-in-focus
     /// image is rendered as the layer stack that `render --image --disparity` makes of it
     /// at the current estimate (the hidden background filled in behind nearer layers), at
@@ -127,6 +132,9 @@ impl OptimiserArgs {
                 None => bail!("invalid parameter --median-sigma: the median refinement is off (--median-radius 0)"),
             }
         }
+        if let Some(b) = self.colour_bins {
+            o.colour_vote = (b > 0).then_some(b);
+        }
         if let Some(n) = self.occlusion_layers {
             o.layered = (n > 1).then(|| LayeredObjective {
                 max_layers: n,
@@ -175,7 +183,10 @@ fn parse_init(s: &str) -> Result<Init> {
 /// Loss: 0.5 L1 + 20 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
 /// started from a plane sweep, at the finest scale a cost budget allows; clipped
 /// highlights of the all-in-focus image are modelled (their lost energy is found in the
-/// defocused image); pixels the defocused image clips are left out. Writes the disparity
+/// defocused image); pixels the defocused image clips are left out. The result is refined
+/// by an edge-aware weighted median and a colour vote (pixels of one colour take their
+/// median disparity: right where each surface has its own colours; --colour-bins 0 if
+/// textures span several depths). Writes the disparity
 /// (near = 1), a confidence map (where the pair carries depth information), a preview and
 /// a JSON log of every iteration and the time per scale.
 ///

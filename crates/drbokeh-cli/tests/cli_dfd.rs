@@ -172,3 +172,47 @@ fn dfd_occlusion_layers_are_logged_and_checked() {
     assert!(stderr(&o).contains("--occlusion-layers"), "{}", stderr(&o));
     assert!(!out.exists());
 }
+
+#[test]
+fn dfd_colour_vote_is_on_by_default_logged_and_checked() {
+    let d = tempfile::tempdir().unwrap();
+    let (a, b) = write_pair(d.path(), 32, 32);
+    let out = d.path().join("disp.png");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "dfd",
+            "--all-in-focus",
+            p(&a),
+            "--defocused",
+            p(&b),
+            "--focus",
+            "0",
+            "--blur",
+            "4",
+            "--fine-iterations",
+            "2",
+            "--finest-scale",
+            "0",
+            "--output",
+            p(&out),
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        drbokeh(&args)
+    };
+    let log_of = || -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap()
+    };
+    let o = run(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(log_of()["colour_vote"], 16);
+    std::fs::remove_file(&out).unwrap();
+    let o = run(&["--colour-bins", "0"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(log_of().get("colour_vote").is_none());
+    std::fs::remove_file(&out).unwrap();
+    let o = run(&["--colour-bins", "300"]);
+    assert_eq!(o.status.code(), Some(2)); // a usage error
+    assert!(stderr(&o).contains("--colour-bins"), "{}", stderr(&o));
+    assert!(!out.exists());
+}

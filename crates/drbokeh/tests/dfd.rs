@@ -131,7 +131,7 @@ fn baseline_colour_gradients_match_finite_differences() {
 /// A 64x64 piecewise-planar scene rendered by our renderer (K = 10, focus 1): optimising
 /// through the same renderer recovers its disparity. This is the optimiser's sanity check,
 /// so it runs with the paper's loss weights (G 0.5) and without the weighted-median
-/// refinement, both tuned for ray-traced pairs (with them this pair ends at MAE 0.055). The scene's disparity spans 0.2 to
+/// refinement and the colour vote, all tuned for ray-traced pairs (with them this pair ends at MAE 0.055). The scene's disparity spans 0.2 to
 /// 0.92 and the initial guess is 0.5 everywhere (MAE about 0.2). We require MAE < 0.02:
 /// below 3% of the range, i.e. the regions' depths are recovered and only pixels within a
 /// blur radius of a depth edge, where defocus cannot tell which side a pixel belongs to,
@@ -149,6 +149,7 @@ fn dfd_recovers_a_known_disparity() {
     o.schedule.fine_iterations = 150;
     o.weights = drbokeh::dfd::LossWeights::PAPER;
     o.median = None;
+    o.colour_vote = None;
     let r = estimate_disparity(&pair.all_in_focus, &pair.defocused, &o, &mut |_| {}).unwrap();
     let start = disparity_errors(
         &Image::from_vec(64, 64, 1, vec![0.5f32; 64 * 64]).unwrap(),
@@ -293,7 +294,7 @@ fn masked_mae(a: &Image<f32>, b: &Image<f32>, mask: &[bool]) -> f64 {
     s / n.max(1) as f64
 }
 
-/// The plane-sweep start alone (one Adam step after it, no median refinement) recovers a
+/// The plane-sweep start alone (one Adam step after it, no median refinement or colour vote) recovers a
 /// piecewise disparity (a sloped background 0.2-0.45, a rectangle 0.55-0.7, a disc 0.8-0.92)
 /// rendered by our renderer: away from the depth edges its error is small (MAE < 0.03,
 /// against the constant 0.5's > 0.15 there), which a wrong cost, a wrong sign of the blur or
@@ -306,6 +307,7 @@ fn plane_sweep_start_recovers_a_piecewise_disparity() {
     let mut o = DfdOptions::new(s, RenderLayer::DrBokeh);
     o.init = Init::Sweep(9);
     o.median = None;
+    o.colour_vote = None;
     o.schedule.finest_scale = Some(0);
     o.schedule.fine_iterations = 1;
     let r = estimate_disparity(&pair.all_in_focus, &pair.defocused, &o, &mut |_| {}).unwrap();

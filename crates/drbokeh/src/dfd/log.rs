@@ -13,7 +13,7 @@
 //!                 "learning_rate_decay", "patience", "min_improvement" },
 //!   "parameterisation": "sigmoid" | "clamped", "optimiser": "shared_adam" | "adam",
 //!   "highlights": "model" | "mask" | "ignore",
-//!   "median": { "radius_blur_fraction", "sigma" } | null,
+//!   "median": { "radius_blur_fraction", "sigma" } | null, "colour_vote": bins (absent: off),
 //!   "init": { "constant": v } | { "sweep": n },
 //!   "initial_disparity_given": bool, "engine": "fast" | "threaded" | "reference",
 //!   "clipped_aif_pixels", "clipped_target_pixels", "masked_fraction",
@@ -100,6 +100,9 @@ pub struct RunOptions {
     pub highlights: Highlights,
     /// Weighted-median refinement (null: off).
     pub median: Option<MedianRefine>,
+    /// Bins per channel of the colour vote (absent: off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour_vote: Option<usize>,
     /// Initialisation.
     pub init: Init,
     /// Whether a starting disparity map was given (it replaces `init`).
@@ -126,6 +129,7 @@ impl RunOptions {
             optimiser: options.optimiser,
             highlights: options.highlights,
             median: options.median,
+            colour_vote: options.colour_vote,
             init: options.init,
             initial_disparity_given: options.initial_disparity.is_some(),
             engine: format!("{:?}", options.engine).to_lowercase(),

@@ -192,6 +192,61 @@ pub(super) fn weighted_median(
         .collect()
 }
 
+/// Non-local colour vote: every pixel whose all-in-focus colour (display-encoded, in
+/// [0, 1]) falls in the same cube of a `bins`^3 grid takes the median disparity of all
+/// such pixels in the image (the lower median), provided at least
+/// [`COLOUR_VOTE_MAJORITY`] of them lie within [`COLOUR_VOTE_TOLERANCE`] of it. Pixels marked `keep` (clipped highlights,
+/// whose colour says nothing about their depth) neither vote nor change. The prior: one
+/// surface has one palette, so pixels the sweep and the optimiser got wrong (holes of a
+/// fence filled with its disparity, a foreground's blur spread over the background) are
+/// outvoted by the many pixels of the same colour elsewhere.
+pub(super) fn colour_vote(
+    data: &[f64],
+    guide: &[[f64; 3]],
+    keep: &[bool],
+    bins: usize,
+) -> Vec<f64> {
+    let cube = |c: &[f64; 3]| -> usize {
+        c.iter().fold(0, |acc, &v| {
+            acc * bins + ((v.clamp(0.0, 1.0) * bins as f64) as usize).min(bins - 1)
+        })
+    };
+    let mut members: Vec<(usize, f64)> = (0..data.len())
+        .filter(|&i| !keep[i])
+        .map(|i| (cube(&guide[i]), data[i]))
+        .collect();
+    members.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    // The median of each cube, where its members agree on it.
+    let mut median = std::collections::HashMap::new();
+    let mut start = 0;
+    while start < members.len() {
+        let key = members[start].0;
+        let end = start + members[start..].partition_point(|m| m.0 == key);
+        let m = members[(start + end - 1) / 2].1;
+        let near = members[start..end]
+            .iter()
+            .filter(|v| (v.1 - m).abs() <= COLOUR_VOTE_TOLERANCE)
+            .count();
+        if near as f64 >= COLOUR_VOTE_MAJORITY * (end - start) as f64 {
+            median.insert(key, m);
+        }
+        start = end;
+    }
+    (0..data.len())
+        .map(|i| match keep[i] {
+            true => data[i],
+            false => *median.get(&cube(&guide[i])).unwrap_or(&data[i]),
+        })
+        .collect()
+}
+
+/// Disparity distance from a colour cube's median within which a member agrees with it.
+const COLOUR_VOTE_TOLERANCE: f64 = 0.1;
+/// Fraction of a colour cube's members that must agree with its median for the cube to
+/// vote; a colour shared by surfaces at several depths (a texture spanning a depth edge)
+/// has no such majority, and its pixels keep their own disparity.
+const COLOUR_VOTE_MAJORITY: f64 = 0.5;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -277,5 +332,30 @@ mod tests {
         seed[5 * w + 5] = true;
         let d = dilate(&seed, w, h, 3.0);
         assert!(d[5 * w + 8] && d[8 * w + 5] && !d[5 * w + 9] && !d[8 * w + 8]);
+    }
+
+    #[test]
+    fn colour_vote_outvotes_a_minority_and_keeps_kept_pixels() {
+        // Two colours: red pixels mostly at 0.2 (one wrong at 0.9), blue at 0.7; a kept
+        // (clipped) pixel of the red colour stays as it was and does not vote.
+        let red = [0.9, 0.1, 0.1];
+        let blue = [0.1, 0.1, 0.9];
+        let guide = [red, red, red, red, blue, blue, blue, red];
+        let data = [0.2, 0.2, 0.9, 0.2, 0.7, 0.7, 0.15, 0.95];
+        let mut keep = [false; 8];
+        keep[7] = true;
+        let out = colour_vote(&data, &guide, &keep, 16);
+        assert_eq!(&out[..4], &[0.2; 4]);
+        assert_eq!(&out[4..7], &[0.7; 3]);
+        assert_eq!(out[7], 0.95);
+        // One bin per channel merges the colours: of 0.15, 0.2 x3, 0.7 x2 and 0.9, four
+        // lie within 0.1 of their median 0.2, a majority.
+        let one = colour_vote(&data, &guide, &keep, 1);
+        assert!(one[..7].iter().all(|&v| v == 0.2));
+        // A colour spread over many depths (a texture across a depth edge) has no
+        // majority: its pixels keep their own disparity.
+        let spread = [0.1, 0.3, 0.5, 0.7, 0.9, 0.2, 0.4, 0.6];
+        let out = colour_vote(&spread, &[red; 8], &[false; 8], 16);
+        assert_eq!(out, spread);
     }
 }

@@ -316,6 +316,10 @@ impl Schedule {
     }
 }
 
+/// Bins per channel of the default colour vote ([`DfdOptions::colour_vote`]), chosen on the
+/// tuning seeds (`docs/dfd.md`).
+pub const DEFAULT_COLOUR_VOTE_BINS: usize = 16;
+
 /// Options of one depth-from-defocus run.
 #[derive(Clone, Debug)]
 pub struct DfdOptions {
@@ -341,6 +345,10 @@ pub struct DfdOptions {
     pub highlights: Highlights,
     /// Weighted-median refinement of the result (`None`: off).
     pub median: Option<MedianRefine>,
+    /// Non-local colour vote on the full-resolution result, with this many bins per
+    /// channel (`None`: off): pixels of one colour take their median disparity
+    /// (`docs/dfd.md`).
+    pub colour_vote: Option<usize>,
     /// Initial disparity.
     pub init: Init,
     /// A starting disparity map (the pair's size, one channel) instead of [`DfdOptions::init`];
@@ -384,6 +392,7 @@ impl DfdOptions {
                 radius_blur_fraction: 1.5,
                 sigma: 0.05,
             }),
+            colour_vote: Some(DEFAULT_COLOUR_VOTE_BINS),
             init: Init::Sweep(9),
             initial_disparity: None,
             engine: Engine::Fast,
@@ -429,6 +438,9 @@ impl DfdOptions {
             if !(m.sigma > 0.0 && m.sigma <= 10.0) {
                 return Err(Error::param("median_sigma", "must be in (0, 10]"));
             }
+        }
+        if self.colour_vote.is_some_and(|b| !(1..=256).contains(&b)) {
+            return Err(Error::param("colour_bins", "must be between 0 and 256"));
         }
         for (name, w) in [
             ("l1", self.weights.l1),

@@ -3,7 +3,8 @@
 use super::layered::LayeredModel;
 use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
 use super::maps::{
-    box_mean, dilate, encode_image, pool, pool_adjoint, to_image, upsample, weighted_median,
+    box_mean, colour_vote, dilate, encode_image, pool, pool_adjoint, to_image, upsample,
+    weighted_median,
 };
 use super::objective::{structure_min_side, ImageObjective, SMOOTHNESS_MIN_SIDE};
 use super::sweep::sweep;
@@ -568,6 +569,21 @@ pub fn estimate_disparity<T: Real>(
             d = weighted_median(&d, &guide, w, h, 1 << finest, m.sigma);
         }
         (d, upsample(&conf, fw, fh, w, h))
+    };
+    let disp = match options.colour_vote {
+        Some(bins) => {
+            let guide: Vec<[f64; 3]> = all_in_focus
+                .data
+                .chunks_exact(3)
+                .map(|p| [p[0].f64(), p[1].f64(), p[2].f64()])
+                .collect();
+            let keep: Vec<bool> = aif_clipped
+                .chunks_exact(3)
+                .map(|c| c.iter().any(|&b| b))
+                .collect();
+            colour_vote(&disp, &guide, &keep, bins)
+        }
+        None => disp,
     };
     let disparity: Image<T> = to_image(&disp, w, h, 1);
 
