@@ -75,9 +75,11 @@ pub struct OptimiserArgs {
     /// in the weighted median falls to exp(-1/2) (default 0.05).
     #[arg(long, value_name = "SIGMA")]
     pub median_sigma: Option<f64>,
-    /// Bins per channel of the colour vote on the result: pixels whose all-in-focus colour
-    /// falls in one of bins^3 cubes take the median disparity of all of them (default 16;
-    /// 0 turns the vote off). A prior that one surface has one palette (docs/dfd.md).
+    /// Colour vote on the result, with N bins per channel (default 0: off; 16 was tuned):
+    /// pixels whose all-in-focus colour falls in one of N^3 cubes take the median disparity
+    /// of all of them, where at least half of the cube agrees. A prior that each surface has
+    /// its own palette: it helps where that holds (the benchmark's billboards) and flattens
+    /// a texture that spans several depths (docs/dfd.md).
     #[arg(long, value_name = "N")]
     pub colour_bins: Option<usize>,
     /// Layers of the occlusion-aware objective of the drbokeh method: the all-in-focus
@@ -184,9 +186,9 @@ fn parse_init(s: &str) -> Result<Init> {
 /// started from a plane sweep, at the finest scale a cost budget allows; clipped
 /// highlights of the all-in-focus image are modelled (their lost energy is found in the
 /// defocused image); pixels the defocused image clips are left out. The result is refined
-/// by an edge-aware weighted median and a colour vote (pixels of one colour take their
-/// median disparity: right where each surface has its own colours; --colour-bins 0 if
-/// textures span several depths). Writes the disparity
+/// by an edge-aware weighted median (and, with --colour-bins 16, a colour vote: pixels of
+/// one colour take their median disparity, right where each surface has its own colours,
+/// wrong where a texture spans several depths). Writes the disparity
 /// (near = 1), a confidence map (where the pair carries depth information), a preview and
 /// a JSON log of every iteration and the time per scale.
 ///

@@ -174,7 +174,7 @@ fn dfd_occlusion_layers_are_logged_and_checked() {
 }
 
 #[test]
-fn dfd_colour_vote_is_on_by_default_logged_and_checked() {
+fn dfd_colour_vote_is_off_by_default_logged_when_on_and_checked() {
     let d = tempfile::tempdir().unwrap();
     let (a, b) = write_pair(d.path(), 32, 32);
     let out = d.path().join("disp.png");
@@ -204,6 +204,10 @@ fn dfd_colour_vote_is_on_by_default_logged_and_checked() {
         serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap()
     };
     let o = run(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(log_of().get("colour_vote").is_none());
+    std::fs::remove_file(&out).unwrap();
+    let o = run(&["--colour-bins", "16"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(log_of()["colour_vote"], 16);
     std::fs::remove_file(&out).unwrap();
