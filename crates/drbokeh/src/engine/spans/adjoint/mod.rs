@@ -32,8 +32,8 @@
 //!    the forward's in-focus interpolation (error `<= 1e-6` per tap in `O`) is not
 //!    differentiated, so the backward is the exact one's within `1e-6` there.
 //!
-//! **Recorded sums** (preset `physical`'s sharp step). The span forward's sharp ring ends at
-//! `r + 2.75` (`S <= 6.8e-8` per tap), the fast tape's sums reach the backward's `r + 6`.
+//! **Recorded sums** (both steps). The span forward's sharp ring ends at `r + 2.75`
+//! (`S <= 6.8e-8` per tap), the paper ring at `r + 4.5`; the backward reaches `r + 6`.
 //! The render cannot see the difference, but the chain rule can: the display transfer's
 //! derivative is evaluated at the composite of the recorded sums, and for a dark channel
 //! of a layer colour (`B ~ 1e-6`, the back layer's black stripes in the "blobs" scene of
@@ -42,11 +42,14 @@
 //! 0.5 % off there, and the front layer's `dL/dC = o / (W + 1e-8)`, large at its edge,
 //! carried that into the coverage share and the alpha gradient: 1.8e-2 of its largest
 //! value (measured; every recorded `W`, `B`, `o` of the two tapes agreed after the
-//! refinement of small weights to within 1e-6, except for that tail). So for the sharp
-//! step the tape's sums come from a second span forward whose rings reach `r + 6`
+//! refinement of small weights to within 1e-6, except for that tail). So the tape's sums
+//! come from a second span forward whose rings reach `r + 6`
 //! ([`super::render_recording_to`]; its output is discarded, the tape's output is the
 //! span render): O(r) per source like the forward, where this used to be a fast (O(r^2))
-//! forward. The paper step's ring already ends at the render's `r + 4.5`. The soft disc's
+//! forward. The paper step's `r + 4.5` tail does the same on a smaller scale: with its own
+//! record the mixed spans/taps scene of `tests/spans_adjoint.rs` was 2.8e-4 off (layer-0
+//! alpha), with the `r + 6` record 4.2e-5; it costs paper's `vjp` one more span forward
+//! (a render is about 15 % of its CPU at 512 px K 30). The soft disc's
 //! own sums and its pass C are spans ([`disc`]: O(r) per receiver).
 //!
 //! **Speed** (`drbokeh vjp`, whole process, demo scene, f32, 2 shared cores, load 8-13,
@@ -75,7 +78,7 @@ use crate::engine::fast::tiles::WindowTables;
 use crate::engine::planes::Planes;
 use crate::engine::tape::{Backward, Gradients};
 use crate::image::Image;
-use crate::model::{Coverage, LayerAtPixel, ScatterStep};
+use crate::model::{Coverage, LayerAtPixel};
 use crate::presets::RenderSettings;
 use crate::progress::{NoProgress, Progress};
 use crate::stack::LayerStack;
@@ -102,24 +105,19 @@ pub(crate) fn render_with_tape<T: Real>(
 ) -> (Image<T>, SpanTape<T>) {
     let (img, _, rec) = render_recording(stack, settings, progress, choice, true);
     let rec = rec.unwrap_or_else(|| unreachable!("render_recording records when asked"));
-    // The sharp step: the sums out to the backward's reach (see the module documentation,
-    // "Recorded sums"), from a second span forward whose output is not used.
-    let saved = match settings.model().step {
-        ScatterStep::Sharp => {
-            render_recording_to(
-                stack,
-                settings,
-                &NoProgress,
-                choice,
-                true,
-                Some(sources::TAP_ROW_TAIL_PX),
-            )
-            .2
-            .unwrap_or_else(|| unreachable!("render_recording_to records when asked"))
-            .saved
-        }
-        ScatterStep::Paper => rec.saved,
-    };
+    // The sums out to the backward's reach (see the module documentation, "Recorded
+    // sums"), from a second span forward whose output is not used.
+    let saved = render_recording_to(
+        stack,
+        settings,
+        &NoProgress,
+        choice,
+        true,
+        Some(sources::TAP_ROW_TAIL_PX),
+    )
+    .2
+    .unwrap_or_else(|| unreachable!("render_recording_to records when asked"))
+    .saved;
     (
         img,
         SpanTape {
