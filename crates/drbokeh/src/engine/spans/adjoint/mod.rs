@@ -103,11 +103,12 @@ pub(crate) fn render_with_tape<T: Real>(
     progress: &dyn Progress,
     choice: Choice,
 ) -> (Image<T>, SpanTape<T>) {
-    let (img, _, rec) = render_recording(stack, settings, progress, choice, true);
-    let rec = rec.unwrap_or_else(|| unreachable!("render_recording records when asked"));
+    let (img, _, _) = render_recording(stack, settings, progress, choice, false);
     // The sums out to the backward's reach (see the module documentation, "Recorded
-    // sums"), from a second span forward whose output is not used.
-    let saved = render_recording_to(
+    // sums"), from a second span forward whose output is not used. Its band-layers take
+    // the same spans-or-taps choice as the render's (the choice does not depend on the
+    // ring), so its per-row choices are the render's too.
+    let rec = render_recording_to(
         stack,
         settings,
         &NoProgress,
@@ -116,14 +117,13 @@ pub(crate) fn render_with_tape<T: Real>(
         Some(sources::TAP_ROW_TAIL_PX),
     )
     .2
-    .unwrap_or_else(|| unreachable!("render_recording_to records when asked"))
-    .saved;
+    .unwrap_or_else(|| unreachable!("render_recording_to records when asked"));
     (
         img,
         SpanTape {
             settings: settings.clone(),
             stack: stack.clone(),
-            saved,
+            saved: rec.saved,
             span_rows: rec.span_rows,
         },
     )
