@@ -353,6 +353,17 @@ impl ExpTable {
         }
         s
     }
+
+    /// The step of a source with factor `e_r` at the single offset `(dx, dy)` (either
+    /// sign: a circle's step depends on `|dx|` and `|dy|`), times the window mask: one lane
+    /// of [`ExpTable::steps`], for the adjoint's gathers and scatters.
+    #[inline(always)]
+    pub fn step<T: Real>(&self, e_r: f64, dx: isize, dy: isize) -> T {
+        let f = self.factor[dy.unsigned_abs() * self.stride + dx.unsigned_abs()];
+        let t = T::c((f * e_r).min(self.max));
+        let inside = if f > 0.0 { T::one() } else { T::zero() };
+        inside / (T::one() + t)
+    }
 }
 
 /// One row of a disc: the interior columns and the ring runs (offsets relative to the
@@ -527,6 +538,10 @@ mod tests {
                                 if !model::in_window(-x, -y, big_r) {
                                     assert_eq!((s32[l], s64[l]), (0.0, 0.0));
                                     continue;
+                                }
+                                // The single-offset lookup, any sign, is the same lane.
+                                for (sx, sy) in [(x, y), (-x, y), (x, -y), (-x, -y)] {
+                                    assert_eq!(table.step::<f64>(e_r, sx, sy), s64[l]);
                                 }
                                 let g = ((x * x + y * y) as f64).sqrt();
                                 let u = (r - g).max(STEP_ARGUMENT_MIN);

@@ -325,7 +325,8 @@ fn exact_tap<T: Real, const SHARP: bool>(
 }
 
 /// The taps of receiver columns `xa ..= xb` of image row `yr` (row offset `dy`): 8-lane
-/// runs (the fast adjoint's), the centre tap (`O = 1`) scalar.
+/// runs (the fast adjoint's), the centre tap (`O = 1`) scalar. Not recursive, so that it
+/// inlines into the caller's AVX2 code path.
 #[inline(always)]
 fn run_taps<T: Real, const SHARP: bool>(
     ctx: &Ctx<'_, T>,
@@ -336,13 +337,26 @@ fn run_taps<T: Real, const SHARP: bool>(
     (xa, xb): (isize, isize),
     acc: &mut Sums<T>,
 ) {
-    if xa > xb {
-        return;
-    }
     if dy == 0 && (xa..=xb).contains(&src.xs) {
-        run_taps::<T, SHARP>(ctx, table, data, src, (yr, dy), (xa, src.xs - 1), acc);
+        run_part(ctx, data, src, (yr, dy), (xa, src.xs - 1), acc);
         exact_tap::<T, SHARP>(ctx, table, src, (yr, dy), src.xs, acc);
-        run_taps::<T, SHARP>(ctx, table, data, src, (yr, dy), (src.xs + 1, xb), acc);
+        run_part(ctx, data, src, (yr, dy), (src.xs + 1, xb), acc);
+    } else {
+        run_part(ctx, data, src, (yr, dy), (xa, xb), acc);
+    }
+}
+
+/// [`run_taps`] over columns `xa ..= xb` that do not hold the centre tap.
+#[inline(always)]
+fn run_part<T: Real>(
+    ctx: &Ctx<'_, T>,
+    data: &RowData,
+    src: &Source<T>,
+    (yr, dy): (usize, isize),
+    (xa, xb): (isize, isize),
+    acc: &mut Sums<T>,
+) {
+    if xa > xb {
         return;
     }
     let w = ctx.rcv.width;
