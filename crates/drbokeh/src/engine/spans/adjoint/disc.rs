@@ -24,7 +24,7 @@
 use super::super::geometry::{ExpTable, GaugeTable, Rings, Shape, STEP_ARGUMENT_MIN, TABLE_MARGIN};
 use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
-use crate::model::{self, CoverageRadius, DiscCoverage, ScatterStep};
+use crate::model::{self, CoverageRadius, DiscCoverage};
 use crate::Real;
 use rayon::prelude::*;
 
@@ -105,11 +105,7 @@ impl<'a, T: Real> DiscCtx<'a, T> {
                 let m = self.table_index(dx, dy);
                 let (g, mask) = (self.table.gauge[m], self.table.mask[m]);
                 let u = (r_c - g).max(T::c(STEP_ARGUMENT_MIN));
-                let s = match self.src.step {
-                    ScatterStep::Sharp => model::sharp_step_fast(u),
-                    ScatterStep::Paper => model::soft_step_fast(u),
-                };
-                s * mask
+                model::scatter_step_fast(self.src.step, u) * mask
             }
         };
         (s, model::scatter_step_derivative(self.src.step, s))
@@ -180,6 +176,13 @@ impl<'a, T: Real> DiscCtx<'a, T> {
             out_row[(cx as isize + dx) as usize] += (sh * s).f64();
         }
     }
+
+    /// The gauge-table index of offset `(dx, dy)`.
+    #[inline(always)]
+    fn table_index(&self, dx: isize, dy: isize) -> usize {
+        let t = (dy + self.table.big_r as isize) as usize;
+        ((t * self.table.stride + self.table.big_r + TABLE_MARGIN) as isize + dx) as usize
+    }
 }
 
 /// Adds `t` to the f64 sums.
@@ -187,15 +190,6 @@ impl<'a, T: Real> DiscCtx<'a, T> {
 fn add<T: Real>(sums: &mut [f64; 4], t: [T; 4]) {
     for (s, t) in sums.iter_mut().zip(t) {
         *s += t.f64();
-    }
-}
-
-impl<'a, T: Real> DiscCtx<'a, T> {
-    /// The gauge-table index of offset `(dx, dy)`.
-    #[inline(always)]
-    fn table_index(&self, dx: isize, dy: isize) -> usize {
-        let t = (dy + self.table.big_r as isize) as usize;
-        ((t * self.table.stride + self.table.big_r + TABLE_MARGIN) as isize + dx) as usize
     }
 }
 

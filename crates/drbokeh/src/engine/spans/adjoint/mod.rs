@@ -59,7 +59,9 @@
 //! takes 0.5-4.3 s of CPU on the same workloads, so the backward is still 5-30x its forward
 //! (issue 18's target is 3x). Those physical figures include a second (fast) forward, now
 //! a second span forward ("Recorded sums"): 512 px K 30 physical `vjp` 16.7 -> 10.6 s of
-//! CPU (load 15, same run, one run each); what remains is mostly the soft disc's rings.
+//! CPU (load 15, same run, one run each). The soft disc's steps by table then took it to
+//! 5.8-6.5 s at low load (from 7.5-8.8, [`disc`]); what remains is mostly pass B's ring
+//! runs, the soft disc's rings and pass C.
 //!
 //! The recorded sums are the forward's (`C`, `W` within `2e-5` relative, see
 //! `spans/mod.rs`), so the chain rule's upstream factors carry the forward's error too; the
