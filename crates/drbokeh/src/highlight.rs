@@ -338,11 +338,10 @@ impl HighlightEstimate {
         if w == 0 || h == 0 {
             return Ok(out);
         }
-        let lin: Vec<f64> = rgb_encoded
-            .data
-            .iter()
-            .map(|v| tone.linearize(v.f64().max(0.0)))
-            .collect();
+        let lin = LinearPhoto {
+            encoded: &rgb_encoded.data,
+            tone,
+        };
         let est = *self;
         let mut mark = vec![0u32; w * h];
         let mut stamp = 1u32;
@@ -372,11 +371,11 @@ impl HighlightEstimate {
     /// (gain, tint) of one region; `mark` is scratch, values `stamp..stamp + 4` unused
     /// before this call.
     #[allow(clippy::too_many_arguments)]
-    fn estimate(
+    fn estimate<T: Real>(
         &self,
         region: &[usize],
         value: &[f64],
-        lin: &[f64],
+        lin: &LinearPhoto<'_, T>,
         w: usize,
         h: usize,
         mark: &mut [u32],
@@ -412,7 +411,7 @@ impl HighlightEstimate {
         }
         let mut bg = [0.0; 3];
         for (c, b) in bg.iter_mut().enumerate() {
-            let mut v: Vec<f64> = ring.iter().map(|&j| lin[3 * j + c]).collect();
+            let mut v: Vec<f64> = ring.iter().map(|&j| lin.at(3 * j + c)).collect();
             v.sort_by(f64::total_cmp);
             *b = v.get(v.len() / 2).copied().unwrap_or(0.0);
         }
@@ -451,7 +450,7 @@ impl HighlightEstimate {
         }
         for &j in &rim_seen {
             for c in 0..3 {
-                rim[c] += (lin[3 * j + c] - bg[c]).max(0.0);
+                rim[c] += (lin.at(3 * j + c) - bg[c]).max(0.0);
             }
         }
         let rim_light = (rim[0] + rim[1] + rim[2]) / 3.0;
@@ -468,11 +467,11 @@ impl HighlightEstimate {
         }
         let mut bg_next = [0.0; 3];
         for (c, b) in bg_next.iter_mut().enumerate() {
-            let mut v: Vec<f64> = next.iter().map(|&j| lin[3 * j + c]).collect();
+            let mut v: Vec<f64> = next.iter().map(|&j| lin.at(3 * j + c)).collect();
             v.sort_by(f64::total_cmp);
             *b = v.get(v.len() / 2).copied().unwrap_or(bg[c]);
         }
-        let lift_of = |j: usize, c: usize| (lin[3 * j + c] - bg_next[c]).max(0.0);
+        let lift_of = |j: usize, c: usize| (lin.at(3 * j + c) - bg_next[c]).max(0.0);
         let lifts: Vec<f64> = rim_seen
             .iter()
             .map(|&j| (0..3).map(|c| lift_of(j, c)).sum::<f64>() / 3.0)
@@ -509,6 +508,22 @@ impl HighlightEstimate {
             [1.0; 3]
         };
         (g, tint)
+    }
+}
+
+/// The photo's linear values, computed where they are read: the estimate reads the few
+/// pixels around each clipped region, so linearising the whole image up front (one `powf`
+/// per value, serial, before the render) was wasted work.
+struct LinearPhoto<'a, T> {
+    encoded: &'a [T],
+    tone: &'a Tone,
+}
+
+impl<T: Real> LinearPhoto<'_, T> {
+    /// The linear value of interleaved sample `k` (negative encodings read as 0).
+    #[inline]
+    fn at(&self, k: usize) -> f64 {
+        self.tone.linearize(self.encoded[k].f64().max(0.0))
     }
 }
 

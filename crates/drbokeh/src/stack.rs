@@ -1,6 +1,6 @@
 //! The layer stack: the renderer's input. Layers are ordered **front to back**.
 
-use crate::image::{check_dimensions, Image};
+use crate::image::{check_dimensions, first_where, Image};
 use crate::{Error, Real, Result};
 
 /// One layer: display-encoded colour, alpha (coverage) and normalised disparity
@@ -118,17 +118,15 @@ impl<T: Real> LayerStack<T> {
                 }
                 img.check_finite(&what)?;
             }
-            if let Some(v) = l.rgb_encoded.data.iter().find(|v| **v < T::zero()) {
+            let rgb = &l.rgb_encoded.data;
+            if let Some(v) = first_where(rgb, |v| v < T::zero()).map(|i| rgb[i]) {
                 return Err(Error::input(
                     format!("layer {i} rgb"),
                     format!("negative colour value {v:?} (display-encoded colour must be >= 0)"),
                 ));
             }
-            if let Some(v) = l
-                .alpha
-                .data
-                .iter()
-                .find(|v| **v < T::zero() || **v > T::one())
+            let alpha = &l.alpha.data;
+            if let Some(v) = first_where(alpha, |v| v < T::zero() || v > T::one()).map(|i| alpha[i])
             {
                 return Err(Error::input(
                     format!("layer {i} alpha"),

@@ -16,6 +16,7 @@
 
 mod backward;
 mod fast;
+mod longest_first;
 mod planes;
 mod reference;
 mod schedule;

@@ -58,6 +58,7 @@ pub use choice::Choice;
 
 use crate::engine::fast::forward::{band_layer_taps, AlphaSat};
 use crate::engine::fast::tiles::{WindowTables, BAND_ROWS};
+use crate::engine::longest_first::map_longest_first;
 use crate::engine::planes::Planes;
 use crate::image::Image;
 use crate::model::{ApertureEval, Coverage, LayerAtPixel, PixelModel};
@@ -68,7 +69,6 @@ use crate::Real;
 use coverage::{CoverageCtx, DiscGather};
 use focus::{Nodes, FOCUS_CUTOFF};
 use geometry::{ExpTable, GaugeTable, Rings, Shape};
-use rayon::prelude::*;
 use scatter::{BandLayer, SUB_ROWS};
 
 /// What one render did: work on each path (for `RenderStats` and the benchmarks).
@@ -155,11 +155,15 @@ pub(crate) fn render_recording_to<T: Real>(
         .flatten();
     let mut out = Image::new(w, h, 3);
     type BandRecord<T> = (Vec<Vec<LayerAtPixel<T>>>, Vec<bool>);
-    let bands: Vec<(SpanStats, BandRecord<T>)> = out
-        .data
-        .par_chunks_mut(3 * w * band_rows)
-        .enumerate()
-        .map(|(band, chunk)| {
+    let chunks: Vec<&mut [T]> = out.data.chunks_mut(3 * w * band_rows).collect();
+    let costs: Vec<f64> = (0..chunks.len())
+        .map(|band| {
+            let y0 = band * band_rows;
+            band_cost(stack, &pixel, (y0, (y0 + band_rows).min(h)))
+        })
+        .collect();
+    let bands: Vec<(SpanStats, BandRecord<T>)> =
+        map_longest_first(chunks, &costs, |band, chunk| {
             let y0 = band * band_rows;
             let y1 = (y0 + band_rows).min(h);
             let rows = y1 - y0;
@@ -253,8 +257,7 @@ pub(crate) fn render_recording_to<T: Real>(
             }
             progress.advance(rows as u64);
             (stats, (record_saved, record_spans))
-        })
-        .collect();
+        });
     let total = bands
         .iter()
         .map(|b| &b.0)
@@ -280,6 +283,28 @@ pub(crate) fn render_recording_to<T: Real>(
         rec
     });
     (out, total, recording)
+}
+
+/// A band's predicted cost, for the order in which bands are rendered: `r + 1` summed
+/// over every fourth row and column of its visible sources (a source's ring taps and
+/// span writes grow with its radius `r`). Only the order of the bands depends on it.
+fn band_cost<T: Real>(
+    stack: &LayerStack<T>,
+    pixel: &PixelModel<T>,
+    (y0, y1): (usize, usize),
+) -> f64 {
+    let mut cost = 0.0;
+    for layer in &stack.layers {
+        for y in (y0..y1).step_by(4) {
+            for x in (0..stack.width).step_by(4) {
+                if layer.alpha.at(x, y, 0) > T::zero() {
+                    let d = pixel.rel_disp(layer.disparity.at(x, y, 0));
+                    cost += pixel.radius_px(d).f64() + 1.0;
+                }
+            }
+        }
+    }
+    cost
 }
 
 /// The interpolation points for the band's in-focus receivers: `Ok(None)` if there are
