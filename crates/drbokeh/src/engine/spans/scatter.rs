@@ -274,6 +274,18 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
             }
             profiles.v64.clear();
             profiles.v64.extend(sources.iter().flat_map(|s| s.v64));
+            // Maximal runs of sources of equal radius in adjacent columns.
+            profiles.segments.clear();
+            let mut start = 0;
+            for k in 1..=sources.len() {
+                if k == sources.len()
+                    || sources[k].r != sources[start].r
+                    || sources[k].xs != sources[start].xs + (k - start) as isize
+                {
+                    profiles.segments.push((start, k));
+                    start = k;
+                }
+            }
         }
         let (dy0, dy1) = (lo.max(-max_reach), hi.min(max_reach));
         if circle {
@@ -430,15 +442,29 @@ struct Profiles<T> {
     values: Vec<T>,
     /// The evaluated profiles.
     rows: Vec<Profile>,
-    /// Per source of the source row: the index of its profile, or [`NO_ROW`].
-    of_source: Vec<u32>,
+    /// The source row's maximal runs of sources of equal radius in adjacent columns,
+    /// `(first, end)` (they share a profile on every disc row).
+    segments: Vec<(usize, usize)>,
+    /// Per segment: the index of its profile on this disc row, or [`NO_ROW`].
+    of_segment: Vec<u32>,
     /// The source row's weights `v` per component (`[component][source]`) ...
     v_planes: [Vec<T>; COMPONENTS],
     /// ... and in f64, `[source][component]`.
     v64: Vec<f64>,
+    /// Working memory of [`add_run`].
+    scratch: RunScratch<T>,
 }
 
-/// [`Profiles::of_source`] of a source without taps on this disc row.
+/// Working memory of [`add_run`], kept across calls.
+#[derive(Default)]
+struct RunScratch<T> {
+    /// The profile's ring taps `(dx, S)`.
+    taps: Vec<(isize, T)>,
+    /// The run's weights per component, between zeros ([`add_run`]).
+    padded: Vec<T>,
+}
+
+/// [`Profiles::of_segment`] of sources without taps on this disc row.
 const NO_ROW: u32 = u32::MAX;
 
 /// One disc row's intervals and where its steps are.
@@ -475,8 +501,8 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     // columns |dx| = k0 ..= outer_hi (the circle is symmetric in dx), followed by zeros so
     // that the outward extension of the chunks adds nothing.
     profiles.rows.clear();
-    profiles.of_source.clear();
-    profiles.of_source.resize(sources.len(), NO_ROW);
+    profiles.of_segment.clear();
+    profiles.of_segment.resize(profiles.segments.len(), NO_ROW);
     // At most 3 n + 2 LANES values per source (a mirrored run of n = R + 1 steps).
     let need = sources.len() * (3 * (ctx.table.big_r + 1) + 3 * LANES);
     if profiles.values.len() < need {
@@ -491,13 +517,14 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     // and the window only), so it shares that profile: exact, and the common case in
     // layers of constant (or row-constant) disparity.
     let mut last: Option<(T, u32)> = None;
-    for (i, src) in sources.iter().enumerate() {
+    for (g, &(i, _)) in profiles.segments.iter().enumerate() {
+        let src = &sources[i];
         if src.reach < ady {
             continue;
         }
         if let Some((r, p)) = last {
             if src.r == r {
-                profiles.of_source[i] = p;
+                profiles.of_segment[g] = p;
                 continue;
             }
         }
@@ -506,7 +533,7 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
         };
         let p = profiles.rows.len() as u32;
         last = Some((src.r, p));
-        profiles.of_source[i] = p;
+        profiles.of_segment[g] = p;
         let k0 = disc.interior.map_or(0, |(_, hi)| hi + 1);
         let outer_hi = match (disc.interior, disc.left, disc.right) {
             (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
@@ -583,62 +610,28 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     // Phase 2: interiors and ring chunks, source by source; a run of sources in adjacent
     // columns sharing a common-row profile is added as whole vectors (below).
     let values = &profiles.values;
-    let w = ctx.width as isize;
-    let (len, d_len) = (acc.ring_len(), (ctx.width + 1) * COMPONENTS);
     let mut work = 0;
-    let n_sources = sources.len();
-    let of_source = &profiles.of_source;
-    let mut i = 0;
-    while i < n_sources {
-        let p = of_source[i];
+    for (&(i, j), &p) in profiles.segments.iter().zip(&profiles.of_segment) {
         if p == NO_ROW {
-            i += 1;
             continue;
         }
         let prof = &profiles.rows[p as usize];
-        let src = &sources[i];
-        if let (false, Some(k0)) = (FOCUS, prof.one_chunk) {
-            // The sources i .. j in adjacent columns with this profile whose chunks lie
-            // within the accumulators' margins (then their spans are not clipped either).
-            let inside = |x: isize| x >= k0 && x + k0 <= w;
-            let mut j = i;
-            while j < n_sources
-                && of_source[j] == p
-                && sources[j].xs == src.xs + (j - i) as isize
-                && inside(sources[j].xs)
-            {
-                j += 1;
-            }
-            if j - i >= RUN_MIN {
-                let at = (prof.base + k0) as usize;
-                let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                let at = (prof.left - k0 - (LANES as isize - 1)) as usize;
-                let left: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                let m = j - i;
-                let (xa, xb1) = ((src.xs - k0 + 1) as usize, (src.xs + k0) as usize);
-                let (rs, ls) = (
-                    (src.xs + k0) as usize + MARGIN,
-                    (src.xs - k0 - (LANES as isize - 1)) as usize + MARGIN,
-                );
-                let v64 = &profiles.v64[i * COMPONENTS..j * COMPONENTS];
-                for row in rows.into_iter().flatten() {
-                    let diff = &mut acc.diff[row * d_len..(row + 1) * d_len];
-                    run_span_write(diff, xa, xb1, v64);
-                    let ring = &mut acc.ring[row * COMPONENTS * len..][..COMPONENTS * len];
-                    for c in 0..COMPONENTS {
-                        let v = &profiles.v_planes[c][i..j];
-                        let ring = &mut ring[c * len..(c + 1) * len];
-                        run_chunk_add(&mut ring[rs..rs + m + LANES - 1], &right, v);
-                        run_chunk_add(&mut ring[ls..ls + m + LANES - 1], &left, v);
-                    }
-                    work += (2 * LANES as u64 + 2) * m as u64;
-                }
-                i = j;
-                continue;
-            }
+        if !FOCUS && j - i >= RUN_MIN {
+            work += add_run(
+                ctx,
+                (sources, &mut *caches),
+                (i, j),
+                (prof, values),
+                (&profiles.v_planes, &profiles.v64),
+                rows,
+                acc,
+                &mut profiles.scratch,
+            );
+            continue;
         }
-        work += add_general::<T, FOCUS>(ctx, src, prof, values, rows, acc, &mut caches[i]);
-        i += 1;
+        for k in i..j {
+            work += add_general::<T, FOCUS>(ctx, &sources[k], prof, values, rows, acc, &mut caches[k]);
+        }
     }
     work
 }
@@ -662,15 +655,151 @@ fn run_span_write(diff: &mut [f64], xa: usize, xb1: usize, v: &[f64]) {
     }
 }
 
-/// The ring chunks `s` of a run of sources in adjacent columns, weighted by their `v`:
-/// `out[k + l] += s[l] v[k]`, lane by lane (each a contiguous multiply-add over the run).
+/// A run of sources `i .. j` in adjacent columns sharing one disc-row profile `prof`
+/// (a circle, no focus rows) into `rows`: the interior spans as whole-vector writes
+/// (those the image does not clip; the others source by source), and the ring as one
+/// convolution of the run's weights with the profile's taps, computed once for both rows
+/// and clipped to the image. The taps are the ring's exactly (`r + u_out` and in), not
+/// padded to chunks. Returns the work done.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn run_chunk_add<T: Real>(out: &mut [T], s: &[T; LANES], v: &[T]) {
-    let m = v.len();
-    for l in 0..LANES {
-        let sl = s[l];
-        for (o, v) in out[l..l + m].iter_mut().zip(v) {
-            *o = *o + sl * *v;
+fn add_run<T: Real>(
+    ctx: &BandLayer<'_, T>,
+    (sources, caches): (&[Source<T>], &mut [Option<Coefficients<T>>]),
+    (i, j): (usize, usize),
+    (prof, values): (&Profile, &[T]),
+    (v_planes, v64): (&[Vec<T>; COMPONENTS], &[f64]),
+    rows: [Option<usize>; 2],
+    acc: &mut Acc<T>,
+    scratch: &mut RunScratch<T>,
+) -> u64 {
+    let w = ctx.width as isize;
+    let (m, xs0, disc) = (j - i, sources[i].xs, prof.disc);
+    let mut work = 0;
+    if let Some((lo, hi)) = disc.interior {
+        // Sources k whose span xs0 + k + (lo ..= hi) lies within the image: ka .. kb.
+        let ka = (-lo - xs0).clamp(0, m as isize) as usize;
+        let kb = (w - hi - xs0).clamp(ka as isize, m as isize) as usize;
+        let d_len = (ctx.width + 1) * COMPONENTS;
+        for row in rows.into_iter().flatten() {
+            if kb > ka {
+                let diff = &mut acc.diff[row * d_len..(row + 1) * d_len];
+                let xa = (xs0 + ka as isize + lo) as usize;
+                let xb1 = (xs0 + ka as isize + hi + 1) as usize;
+                run_span_write(
+                    diff,
+                    xa,
+                    xb1,
+                    &v64[(i + ka) * COMPONENTS..(i + kb) * COMPONENTS],
+                );
+                work += 2 * (kb - ka) as u64;
+            }
+            for k in (0..ka).chain(kb..m) {
+                work += interior::<T, false>(
+                    ctx,
+                    &sources[i + k],
+                    (lo, hi),
+                    row,
+                    acc,
+                    &mut caches[i + k],
+                );
+            }
+        }
+    }
+    // The ring: |dx| in k0 ..= e, S(|dx|) at `base + |dx|` (either layout of the profile).
+    let k0 = disc.interior.map_or(0, |(_, hi)| hi + 1);
+    let e = match (disc.interior, disc.left, disc.right) {
+        (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
+        _ => return work,
+    };
+    scratch.taps.clear();
+    scratch.taps.extend(
+        (-e..=e)
+            .filter(|dx| dx.abs() >= k0)
+            .map(|dx| (dx, values[(prof.base + dx.abs()) as usize])),
+    );
+    // Receiver column xs0 - e + q takes sum_dx S(dx) v[q - e - dx], and v[k] is at
+    // `2 e + k` of its padded plane; q in q0 .. q1 (within the image), in whole chunks.
+    let eu = e as usize;
+    let plane = m + 4 * eu + LANES;
+    if scratch.padded.len() < COMPONENTS * plane {
+        scratch.padded.resize(COMPONENTS * plane, T::zero());
+    }
+    for (c, v) in v_planes.iter().enumerate() {
+        let out = &mut scratch.padded[c * plane..(c + 1) * plane];
+        out[..2 * eu].fill(T::zero());
+        out[2 * eu..2 * eu + m].copy_from_slice(&v[i..j]);
+        out[2 * eu + m..].fill(T::zero());
+    }
+    let q0 = (e - xs0).max(0);
+    let q1 = (m as isize + 2 * e).min(w + e - xs0);
+    if q1 <= q0 {
+        return work;
+    }
+    // Chunks run up to LANES - 1 columns past the image, into the margin.
+    let nq = ((q1 - q0) as usize).div_ceil(LANES) * LANES;
+    let x0 = (xs0 - e + q0) as usize + MARGIN;
+    let len = acc.ring_len();
+    run_conv(
+        &scratch.taps,
+        (&scratch.padded[..COMPONENTS * plane], plane),
+        (q0 as usize + eu, nq),
+        rows_mut(&mut acc.ring, COMPONENTS * len, rows),
+        (x0, len),
+    );
+    let rows_written = rows.iter().flatten().count();
+    work + (rows_written * scratch.taps.len() * m) as u64
+}
+
+/// The rows `rows` of `data` (rows of `size` values), mutably.
+fn rows_mut<T>(data: &mut [T], size: usize, rows: [Option<usize>; 2]) -> [Option<&mut [T]>; 2] {
+    match rows {
+        [Some(a), Some(b)] if a != b => {
+            let (lo, hi) = data.split_at_mut(a.max(b) * size);
+            let first = &mut lo[a.min(b) * size..(a.min(b) + 1) * size];
+            let second = &mut hi[..size];
+            if a < b {
+                [Some(first), Some(second)]
+            } else {
+                [Some(second), Some(first)]
+            }
+        }
+        [Some(a), _] | [None, Some(a)] => [Some(&mut data[a * size..(a + 1) * size]), None],
+        [None, None] => [None, None],
+    }
+}
+
+/// Adds `sum over taps (dx, s) of s padded[c][at + q - dx]` to `out[c][x0 + q]` of each
+/// of `outs` (rows `[component][column]`, `len` columns each), for `q < nq` (a multiple
+/// of [`LANES`]), chunk by chunk with the chunk's sums in registers.
+#[inline(always)]
+fn run_conv<T: Real>(
+    taps: &[(isize, T)],
+    (padded, plane): (&[T], usize),
+    (at, nq): (usize, usize),
+    mut outs: [Option<&mut [T]>; 2],
+    (x0, len): (usize, usize),
+) {
+    let planes: [&[T]; COMPONENTS] = std::array::from_fn(|c| &padded[c * plane..(c + 1) * plane]);
+    for q in (0..nq).step_by(LANES) {
+        let mut sum = [[T::zero(); LANES]; COMPONENTS];
+        for &(dx, s) in taps {
+            let from = ((at + q) as isize - dx) as usize;
+            for c in 0..COMPONENTS {
+                let v: &[T; LANES] = planes[c][from..from + LANES].try_into().expect("LANES");
+                for l in 0..LANES {
+                    sum[c][l] = sum[c][l] + s * v[l];
+                }
+            }
+        }
+        for out in outs.iter_mut().flatten() {
+            for (c, sum) in sum.iter().enumerate() {
+                let at = c * len + x0 + q;
+                let o: &mut [T; LANES] = (&mut out[at..at + LANES]).try_into().expect("LANES");
+                for l in 0..LANES {
+                    o[l] = o[l] + sum[l];
+                }
+            }
         }
     }
 }
