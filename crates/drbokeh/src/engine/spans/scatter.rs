@@ -630,7 +630,8 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
             continue;
         }
         for k in i..j {
-            work += add_general::<T, FOCUS>(ctx, &sources[k], prof, values, rows, acc, &mut caches[k]);
+            work +=
+                add_general::<T, FOCUS>(ctx, &sources[k], prof, values, rows, acc, &mut caches[k]);
         }
     }
     work
@@ -639,19 +640,52 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
 /// The shortest run of sources added as whole vectors ([`scatter_rows_circle`]).
 const RUN_MIN: usize = 4;
 
-/// The interior spans of a run of `v.len() / COMPONENTS` sources in adjacent columns:
-/// each adds its `v` at `xa + k` and subtracts it at `xb1 + k` (source `k` of the run).
+/// The interior spans of a run of `v.len() / COMPONENTS` sources in adjacent columns
+/// into the difference arrays `outs` (one per row): each source `k` of the run adds its
+/// `v` at `xa + k` and subtracts it at `xb1 + k`. Where the two overlap, each column takes
+/// the difference of the two weights once (computed once for both rows).
 #[inline(always)]
-fn run_span_write(diff: &mut [f64], xa: usize, xb1: usize, v: &[f64]) {
-    let n = v.len();
-    for (d, v) in diff[xa * COMPONENTS..xa * COMPONENTS + n].iter_mut().zip(v) {
-        *d += *v;
+fn run_span_write(outs: [Option<&mut [f64]>; 2], xa: usize, xb1: usize, v: &[f64]) {
+    let (a, b) = (xa * COMPONENTS, xb1 * COMPONENTS);
+    match outs {
+        [Some(d1), Some(d2)] => span_pass([d1, d2], a, b, v),
+        [Some(d), None] | [None, Some(d)] => span_pass([d], a, b, v),
+        [None, None] => {}
     }
-    for (d, v) in diff[xb1 * COMPONENTS..xb1 * COMPONENTS + n]
-        .iter_mut()
-        .zip(v)
-    {
-        *d -= *v;
+}
+
+/// [`run_span_write`] into `N` rows, `a < b` the flat offsets of `xa` and `xb1`.
+#[inline(always)]
+fn span_pass<const N: usize>(mut outs: [&mut [f64]; N], a: usize, b: usize, v: &[f64]) {
+    let n = v.len();
+    let mid = b.min(a + n);
+    for o in outs.iter_mut() {
+        for (d, v) in o[a..mid].iter_mut().zip(&v[..mid - a]) {
+            *d += *v;
+        }
+    }
+    if b < a + n {
+        // Columns b .. a + n: + v[x - a] - v[x - b]; then a + n .. b + n: - v[x - b].
+        let len = a + n - b;
+        let (plus, minus) = (&v[b - a..], &v[..len]);
+        let mut seg = outs.each_mut().map(|o| &mut o[b..b + len]);
+        for x in 0..len {
+            let t = plus[x] - minus[x];
+            for o in seg.iter_mut() {
+                o[x] += t;
+            }
+        }
+        for o in outs.iter_mut() {
+            for (d, v) in o[a + n..b + n].iter_mut().zip(&v[len..]) {
+                *d -= *v;
+            }
+        }
+    } else {
+        for o in outs.iter_mut() {
+            for (d, v) in o[b..b + n].iter_mut().zip(v) {
+                *d -= *v;
+            }
+        }
     }
 }
 
@@ -681,19 +715,18 @@ fn add_run<T: Real>(
         let ka = (-lo - xs0).clamp(0, m as isize) as usize;
         let kb = (w - hi - xs0).clamp(ka as isize, m as isize) as usize;
         let d_len = (ctx.width + 1) * COMPONENTS;
+        if kb > ka {
+            let xa = (xs0 + ka as isize + lo) as usize;
+            let xb1 = (xs0 + ka as isize + hi + 1) as usize;
+            run_span_write(
+                rows_mut(&mut acc.diff, d_len, rows),
+                xa,
+                xb1,
+                &v64[(i + ka) * COMPONENTS..(i + kb) * COMPONENTS],
+            );
+            work += (2 * (kb - ka) * rows.iter().flatten().count()) as u64;
+        }
         for row in rows.into_iter().flatten() {
-            if kb > ka {
-                let diff = &mut acc.diff[row * d_len..(row + 1) * d_len];
-                let xa = (xs0 + ka as isize + lo) as usize;
-                let xb1 = (xs0 + ka as isize + hi + 1) as usize;
-                run_span_write(
-                    diff,
-                    xa,
-                    xb1,
-                    &v64[(i + ka) * COMPONENTS..(i + kb) * COMPONENTS],
-                );
-                work += 2 * (kb - ka) as u64;
-            }
             for k in (0..ka).chain(kb..m) {
                 work += interior::<T, false>(
                     ctx,
