@@ -12,7 +12,8 @@ use crate::Real;
 /// Working memory of [`add_run`], kept across calls.
 #[derive(Default)]
 pub(super) struct RunScratch<T> {
-    /// The profile's ring taps `(dx, S)`.
+    /// The profile's ring taps `(dx, S)` for `dx > 0` (each also at `-dx`: a circle's
+    /// row is symmetric).
     taps: Vec<(isize, T)>,
     /// The run's weights per component, between zeros ([`add_run`]).
     padded: Vec<T>,
@@ -126,12 +127,11 @@ pub(super) fn add_run<T: Real>(
         (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
         _ => return work,
     };
+    let centre = (k0 == 0).then(|| values[prof.base as usize]);
     scratch.taps.clear();
-    scratch.taps.extend(
-        (-e..=e)
-            .filter(|dx| dx.abs() >= k0)
-            .map(|dx| (dx, values[(prof.base + dx.abs()) as usize])),
-    );
+    scratch
+        .taps
+        .extend((k0.max(1)..=e).map(|dx| (dx, values[(prof.base + dx) as usize])));
     // Receiver column xs0 - e + q takes sum_dx S(dx) v[q - e - dx], and v[k] is at
     // `2 e + k` of its padded plane; q in q0 .. q1 (within the image), in whole chunks.
     let eu = e as usize;
@@ -155,14 +155,15 @@ pub(super) fn add_run<T: Real>(
     let x0 = (xs0 - e + q0) as usize + MARGIN;
     let len = acc.ring_len();
     run_conv(
-        &scratch.taps,
+        (centre, &scratch.taps),
         (&scratch.padded[..COMPONENTS * plane], plane),
         (q0 as usize + eu, nq),
         rows_mut(&mut acc.ring, COMPONENTS * len, rows),
         (x0, len),
     );
     let rows_written = rows.iter().flatten().count();
-    work + (rows_written * scratch.taps.len() * m) as u64
+    let taps = 2 * scratch.taps.len() + usize::from(centre.is_some());
+    work + (rows_written * taps * m) as u64
 }
 
 /// The rows `rows` of `data` (rows of `size` values), mutably.
@@ -183,12 +184,13 @@ fn rows_mut<T>(data: &mut [T], size: usize, rows: [Option<usize>; 2]) -> [Option
     }
 }
 
-/// Adds `sum over taps (dx, s) of s padded[c][at + q - dx]` to `out[c][x0 + q]` of each
-/// of `outs` (rows `[component][column]`, `len` columns each), for `q < nq` (a multiple
-/// of [`LANES`]), chunk by chunk with the chunk's sums in registers.
+/// Adds `centre padded[c][at + q]` plus, over the taps `(dx, s)`,
+/// `s (padded[c][at + q - dx] + padded[c][at + q + dx])` to `out[c][x0 + q]` of each of
+/// `outs` (rows `[component][column]`, `len` columns each), for `q < nq` (a multiple of
+/// [`LANES`]), chunk by chunk with the chunk's sums in registers.
 #[inline(always)]
 fn run_conv<T: Real>(
-    taps: &[(isize, T)],
+    (centre, taps): (Option<T>, &[(isize, T)]),
     (padded, plane): (&[T], usize),
     (at, nq): (usize, usize),
     mut outs: [Option<&mut [T]>; 2],
@@ -197,12 +199,21 @@ fn run_conv<T: Real>(
     let planes: [&[T]; COMPONENTS] = std::array::from_fn(|c| &padded[c * plane..(c + 1) * plane]);
     for q in (0..nq).step_by(LANES) {
         let mut sum = [[T::zero(); LANES]; COMPONENTS];
-        for &(dx, s) in taps {
-            let from = ((at + q) as isize - dx) as usize;
+        if let Some(s) = centre {
             for c in 0..COMPONENTS {
-                let v: &[T; LANES] = planes[c][from..from + LANES].try_into().expect("LANES");
+                let v: &[T; LANES] = planes[c][at + q..at + q + LANES].try_into().expect("LANES");
                 for l in 0..LANES {
-                    sum[c][l] = sum[c][l] + s * v[l];
+                    sum[c][l] = s * v[l];
+                }
+            }
+        }
+        for &(dx, s) in taps {
+            let (fa, fb) = (at + q - dx as usize, at + q + dx as usize);
+            for c in 0..COMPONENTS {
+                let a: &[T; LANES] = planes[c][fa..fa + LANES].try_into().expect("LANES");
+                let b: &[T; LANES] = planes[c][fb..fb + LANES].try_into().expect("LANES");
+                for l in 0..LANES {
+                    sum[c][l] = sum[c][l] + s * (a[l] + b[l]);
                 }
             }
         }
