@@ -138,6 +138,23 @@ fn spans_match_fast_where_radii_repeat() {
     }
 }
 
+/// Repeated radii at large blur (radii to ~40 px on a 90 px wide image): runs of
+/// sources sharing a profile whose ring spans several chunks, rows without an interior,
+/// and runs whose spans and rings the image clips on both sides.
+#[test]
+fn spans_match_fast_where_large_radii_repeat() {
+    let stack = repeated_radii(90, 84);
+    for aperture in apertures().into_iter().take(2) {
+        for s in presets(settings(1.0, 100.0, 201, aperture.clone())) {
+            check(
+                &stack,
+                &s,
+                &format!("repeated large radii {aperture:?} {:?}", s.preset),
+            );
+        }
+    }
+}
+
 /// Odd and tiny sizes (single rows and columns, fewer pixels than the blur radius), where
 /// every pixel is an edge pixel and the mirror padding holds most of the disc.
 #[test]

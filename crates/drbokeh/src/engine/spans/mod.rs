@@ -21,9 +21,10 @@
 //! evaluated profile, and coverage receivers of equal coverage
 //! radius share one gathered disc: exact (the same values summed in the same order), and
 //! the common case in layers of constant or row-constant disparity. A run of sources in
-//! adjacent columns sharing a profile whose ring is one chunk on each side is added as
-//! whole vectors (each span write and each ring lane a contiguous multiply-add over the
-//! run), not source by source: the same terms, summed in another fixed order. A circle's
+//! adjacent columns sharing a profile is added as whole vectors (`scatter/runs.rs`: the
+//! span writes as shifted copies of the run's weights, the ring as one convolution of
+//! the weights with the profile's taps, once for rows `+-dy`), not source by source: the
+//! same terms, summed in another fixed order. A circle's
 //! ring steps come from a table of exponentials over the window times one exponential
 //! per source ([`geometry::ExpTable`]), not from an `exp` per tap: no new approximation
 //! (closer to the exact step than the per-tap `exp`).

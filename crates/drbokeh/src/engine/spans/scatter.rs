@@ -17,6 +17,9 @@ use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, LayerAtPixel, ScatterStep};
 use crate::Real;
+use runs::{add_run, RunScratch, RUN_MIN};
+
+mod runs;
 
 /// Receiver rows per sub-band (one task, one set of accumulators).
 pub const SUB_ROWS: usize = 128;
@@ -274,6 +277,18 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
             }
             profiles.v64.clear();
             profiles.v64.extend(sources.iter().flat_map(|s| s.v64));
+            // Maximal runs of sources of equal radius in adjacent columns.
+            profiles.segments.clear();
+            let mut start = 0;
+            for k in 1..=sources.len() {
+                if k == sources.len()
+                    || sources[k].r != sources[start].r
+                    || sources[k].xs != sources[start].xs + (k - start) as isize
+                {
+                    profiles.segments.push((start, k));
+                    start = k;
+                }
+            }
         }
         let (dy0, dy1) = (lo.max(-max_reach), hi.min(max_reach));
         if circle {
@@ -430,15 +445,20 @@ struct Profiles<T> {
     values: Vec<T>,
     /// The evaluated profiles.
     rows: Vec<Profile>,
-    /// Per source of the source row: the index of its profile, or [`NO_ROW`].
-    of_source: Vec<u32>,
+    /// The source row's maximal runs of sources of equal radius in adjacent columns,
+    /// `(first, end)` (they share a profile on every disc row).
+    segments: Vec<(usize, usize)>,
+    /// Per segment: the index of its profile on this disc row, or [`NO_ROW`].
+    of_segment: Vec<u32>,
     /// The source row's weights `v` per component (`[component][source]`) ...
     v_planes: [Vec<T>; COMPONENTS],
     /// ... and in f64, `[source][component]`.
     v64: Vec<f64>,
+    /// Working memory of [`add_run`].
+    scratch: RunScratch<T>,
 }
 
-/// [`Profiles::of_source`] of a source without taps on this disc row.
+/// [`Profiles::of_segment`] of sources without taps on this disc row.
 const NO_ROW: u32 = u32::MAX;
 
 /// One disc row's intervals and where its steps are.
@@ -475,8 +495,8 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     // columns |dx| = k0 ..= outer_hi (the circle is symmetric in dx), followed by zeros so
     // that the outward extension of the chunks adds nothing.
     profiles.rows.clear();
-    profiles.of_source.clear();
-    profiles.of_source.resize(sources.len(), NO_ROW);
+    profiles.of_segment.clear();
+    profiles.of_segment.resize(profiles.segments.len(), NO_ROW);
     // At most 3 n + 2 LANES values per source (a mirrored run of n = R + 1 steps).
     let need = sources.len() * (3 * (ctx.table.big_r + 1) + 3 * LANES);
     if profiles.values.len() < need {
@@ -491,13 +511,14 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
     // and the window only), so it shares that profile: exact, and the common case in
     // layers of constant (or row-constant) disparity.
     let mut last: Option<(T, u32)> = None;
-    for (i, src) in sources.iter().enumerate() {
+    for (g, &(i, _)) in profiles.segments.iter().enumerate() {
+        let src = &sources[i];
         if src.reach < ady {
             continue;
         }
         if let Some((r, p)) = last {
             if src.r == r {
-                profiles.of_source[i] = p;
+                profiles.of_segment[g] = p;
                 continue;
             }
         }
@@ -506,7 +527,7 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
         };
         let p = profiles.rows.len() as u32;
         last = Some((src.r, p));
-        profiles.of_source[i] = p;
+        profiles.of_segment[g] = p;
         let k0 = disc.interior.map_or(0, |(_, hi)| hi + 1);
         let outer_hi = match (disc.interior, disc.left, disc.right) {
             (Some(_), _, Some((_, hi))) | (None, Some((_, hi)), _) => hi,
@@ -580,99 +601,34 @@ fn scatter_rows_circle<T: Real, const SHARP: bool, const FOCUS: bool>(
             next = rev + n + LANES;
         }
     }
-    // Phase 2: interiors and ring chunks, source by source; a run of sources in adjacent
-    // columns sharing a common-row profile is added as whole vectors (below).
+    // Phase 2: interiors and ring chunks; a run of at least RUN_MIN sources in adjacent
+    // columns (sharing the profile) as whole vectors (`runs.rs`), others source by source.
     let values = &profiles.values;
-    let w = ctx.width as isize;
-    let (len, d_len) = (acc.ring_len(), (ctx.width + 1) * COMPONENTS);
     let mut work = 0;
-    let n_sources = sources.len();
-    let of_source = &profiles.of_source;
-    let mut i = 0;
-    while i < n_sources {
-        let p = of_source[i];
+    for (&(i, j), &p) in profiles.segments.iter().zip(&profiles.of_segment) {
         if p == NO_ROW {
-            i += 1;
             continue;
         }
         let prof = &profiles.rows[p as usize];
-        let src = &sources[i];
-        if let (false, Some(k0)) = (FOCUS, prof.one_chunk) {
-            // The sources i .. j in adjacent columns with this profile whose chunks lie
-            // within the accumulators' margins (then their spans are not clipped either).
-            let inside = |x: isize| x >= k0 && x + k0 <= w;
-            let mut j = i;
-            while j < n_sources
-                && of_source[j] == p
-                && sources[j].xs == src.xs + (j - i) as isize
-                && inside(sources[j].xs)
-            {
-                j += 1;
-            }
-            if j - i >= RUN_MIN {
-                let at = (prof.base + k0) as usize;
-                let right: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                let at = (prof.left - k0 - (LANES as isize - 1)) as usize;
-                let left: [T; LANES] = values[at..at + LANES].try_into().expect("LANES");
-                let m = j - i;
-                let (xa, xb1) = ((src.xs - k0 + 1) as usize, (src.xs + k0) as usize);
-                let (rs, ls) = (
-                    (src.xs + k0) as usize + MARGIN,
-                    (src.xs - k0 - (LANES as isize - 1)) as usize + MARGIN,
-                );
-                let v64 = &profiles.v64[i * COMPONENTS..j * COMPONENTS];
-                for row in rows.into_iter().flatten() {
-                    let diff = &mut acc.diff[row * d_len..(row + 1) * d_len];
-                    run_span_write(diff, xa, xb1, v64);
-                    let ring = &mut acc.ring[row * COMPONENTS * len..][..COMPONENTS * len];
-                    for c in 0..COMPONENTS {
-                        let v = &profiles.v_planes[c][i..j];
-                        let ring = &mut ring[c * len..(c + 1) * len];
-                        run_chunk_add(&mut ring[rs..rs + m + LANES - 1], &right, v);
-                        run_chunk_add(&mut ring[ls..ls + m + LANES - 1], &left, v);
-                    }
-                    work += (2 * LANES as u64 + 2) * m as u64;
-                }
-                i = j;
-                continue;
-            }
+        if !FOCUS && j - i >= RUN_MIN {
+            work += add_run(
+                ctx,
+                (sources, &mut *caches),
+                (i, j),
+                (prof, values),
+                (&profiles.v_planes, &profiles.v64),
+                rows,
+                acc,
+                &mut profiles.scratch,
+            );
+            continue;
         }
-        work += add_general::<T, FOCUS>(ctx, src, prof, values, rows, acc, &mut caches[i]);
-        i += 1;
+        for k in i..j {
+            work +=
+                add_general::<T, FOCUS>(ctx, &sources[k], prof, values, rows, acc, &mut caches[k]);
+        }
     }
     work
-}
-
-/// The shortest run of sources added as whole vectors ([`scatter_rows_circle`]).
-const RUN_MIN: usize = 4;
-
-/// The interior spans of a run of `v.len() / COMPONENTS` sources in adjacent columns:
-/// each adds its `v` at `xa + k` and subtracts it at `xb1 + k` (source `k` of the run).
-#[inline(always)]
-fn run_span_write(diff: &mut [f64], xa: usize, xb1: usize, v: &[f64]) {
-    let n = v.len();
-    for (d, v) in diff[xa * COMPONENTS..xa * COMPONENTS + n].iter_mut().zip(v) {
-        *d += *v;
-    }
-    for (d, v) in diff[xb1 * COMPONENTS..xb1 * COMPONENTS + n]
-        .iter_mut()
-        .zip(v)
-    {
-        *d -= *v;
-    }
-}
-
-/// The ring chunks `s` of a run of sources in adjacent columns, weighted by their `v`:
-/// `out[k + l] += s[l] v[k]`, lane by lane (each a contiguous multiply-add over the run).
-#[inline(always)]
-fn run_chunk_add<T: Real>(out: &mut [T], s: &[T; LANES], v: &[T]) {
-    let m = v.len();
-    for l in 0..LANES {
-        let sl = s[l];
-        for (o, v) in out[l..l + m].iter_mut().zip(v) {
-            *o = *o + sl * *v;
-        }
-    }
 }
 
 /// A source's disc row `prof` into `rows`: its interior span and its ring chunk by chunk
