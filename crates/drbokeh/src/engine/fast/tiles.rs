@@ -96,19 +96,6 @@ impl<T: Real> WindowTables<T> {
         (-r..=r).map(|dy| self.half_width(dy, reach)).collect()
     }
 
-    /// The offsets `(dx, dy)` of the window rows' taps within `half_widths`
-    /// ([`WindowTables::half_widths`]), row by row.
-    pub fn taps_within<'a>(
-        &self,
-        half_widths: &'a [Option<usize>],
-    ) -> impl Iterator<Item = (isize, isize)> + 'a {
-        let r = self.big_r as isize;
-        half_widths.iter().enumerate().flat_map(move |(t, hw)| {
-            let hw = hw.map_or(-1, |hw| hw as isize);
-            (-hw..=hw).map(move |dx| (dx, t as isize - r))
-        })
-    }
-
     /// The tables of the flipped offsets: `[ddy + R][ddx + R]` holds the gauge of the tap
     /// from a source y to the receiver `x = y + (ddx, ddy)`, i.e. of the offset
     /// `y - x = (-ddx, -ddy)`.

@@ -288,8 +288,10 @@ impl<T: Real> GaugeTable<T> {
 /// (`3e-7` relative in f32), against [`ring_step`]'s `4e-7` of its polynomial `exp` plus the
 /// rounding of `g` and `r - g` to `T` (up to `6 ulp(R)`, `5e-5` relative at `R = 100`).
 pub struct ExpTable {
-    /// Row length (columns `dx = 0 ..` of each row `|dy| = 0 ..= R`).
+    /// Row length (columns `dx = -origin ..= origin` of each row `|dy| = 0 ..= R`).
     stride: usize,
+    /// The column of `dx = 0`, `R + 2 LANES`.
+    origin: usize,
     /// `e^{a (g(dx, dy) - m)}`, 0 outside the window.
     factor: Vec<f64>,
     /// `a`, `c` and `m`.
@@ -312,19 +314,24 @@ impl ExpTable {
         if rate * (centre + (2 * LANES) as f64 + 20.0) >= 700.0 {
             return None;
         }
-        let stride = big_r + 1 + 2 * LANES;
+        let origin = big_r + 2 * LANES;
+        let stride = 2 * origin + 1;
         let mut factor = vec![0.0; (big_r + 1) * stride];
         for dy in 0..=big_r {
-            for dx in 0..stride {
+            for dx in 0..=origin {
                 let (x, y) = (dx as isize, dy as isize);
                 if model::in_window(-x, -y, big_r) {
                     let g = ((dx * dx + dy * dy) as f64).sqrt();
-                    factor[dy * stride + dx] = (rate * (g - centre)).exp();
+                    // The circle is symmetric in dx: the same value on both sides.
+                    let f = (rate * (g - centre)).exp();
+                    factor[dy * stride + origin + dx] = f;
+                    factor[dy * stride + origin - dx] = f;
                 }
             }
         }
         Some(ExpTable {
             stride,
+            origin,
             factor,
             rate,
             scale,
@@ -340,10 +347,11 @@ impl ExpTable {
     }
 
     /// The steps of a source with factor `e_r` ([`ExpTable::source_factor`]) at the
-    /// [`LANES`] offsets `(dx0 + l, dy)`, `dx0 >= 0`, times the window mask (0 outside).
+    /// [`LANES`] offsets `(dx0 + l, dy)`, `-R - 2 LANES <= dx0 <= R + LANES`, times the
+    /// window mask (0 outside).
     #[inline(always)]
     pub fn steps<T: Real>(&self, e_r: f64, dy: isize, dx0: isize) -> [T; LANES] {
-        let at = dy.unsigned_abs() * self.stride + dx0 as usize;
+        let at = dy.unsigned_abs() * self.stride + (self.origin as isize + dx0) as usize;
         let f: &[f64; LANES] = self.factor[at..at + LANES].try_into().expect("LANES");
         let mut s = [T::zero(); LANES];
         for l in 0..LANES {
@@ -352,17 +360,6 @@ impl ExpTable {
             s[l] = inside / (T::one() + t);
         }
         s
-    }
-
-    /// The step of a source with factor `e_r` at the single offset `(dx, dy)` (either
-    /// sign: a circle's step depends on `|dx|` and `|dy|`), times the window mask: one lane
-    /// of [`ExpTable::steps`], for the adjoint's gathers and scatters.
-    #[inline(always)]
-    pub fn step<T: Real>(&self, e_r: f64, dx: isize, dy: isize) -> T {
-        let f = self.factor[dy.unsigned_abs() * self.stride + dx.unsigned_abs()];
-        let t = T::c((f * e_r).min(self.max));
-        let inside = if f > 0.0 { T::one() } else { T::zero() };
-        inside / (T::one() + t)
     }
 }
 
@@ -530,7 +527,8 @@ mod tests {
                     let rows = [0isize, 1, 7, (big_r / 2) as isize, big_r as isize];
                     // The table holds the window's rows 0..=R only.
                     for dy in rows.into_iter().filter(|&dy| dy <= big_r as isize) {
-                        for dx0 in (0..=big_r as isize).step_by(3) {
+                        let (lo, hi) = (-((big_r + 2 * LANES) as isize), big_r as isize);
+                        for dx0 in (lo..=hi).step_by(3) {
                             let s32 = table.steps::<f32>(e_r, dy, dx0);
                             let s64 = table.steps::<f64>(e_r, dy, dx0);
                             for l in 0..LANES {
@@ -539,9 +537,9 @@ mod tests {
                                     assert_eq!((s32[l], s64[l]), (0.0, 0.0));
                                     continue;
                                 }
-                                // The single-offset lookup, any sign, is the same lane.
+                                // The circle is symmetric: lane 0 at any sign is the same.
                                 for (sx, sy) in [(x, y), (-x, y), (x, -y), (-x, -y)] {
-                                    assert_eq!(table.step::<f64>(e_r, sx, sy), s64[l]);
+                                    assert_eq!(table.steps::<f64>(e_r, sy, sx)[0], s64[l]);
                                 }
                                 let g = ((x * x + y * y) as f64).sqrt();
                                 let u = (r - g).max(STEP_ARGUMENT_MIN);

@@ -71,7 +71,7 @@ mod receivers;
 mod refine;
 mod sources;
 pub(in crate::engine) use refine::REFINE_WEIGHT_BELOW;
-pub(in crate::engine) use sources::{gather_source_terms, pass_sources, source_run, SourceTerms};
+pub(in crate::engine) use sources::{gather_source_terms, pass_sources, SourceTerms};
 
 use crate::engine::backward::{self, LayerPartials};
 use crate::engine::fast::forward::render_recording;
@@ -86,7 +86,7 @@ use crate::progress::Progress;
 use crate::stack::LayerStack;
 use crate::{Real, Result};
 pub(in crate::engine) use context::Ctx;
-use context::Receivers;
+pub(in crate::engine) use context::Receivers;
 use rayon::prelude::*;
 use std::borrow::Cow;
 

@@ -264,10 +264,9 @@ fn source_row_run<T: Real>(
 /// Pass B's run over receivers `i0 .. i0 + gauge.len()` (image indices of one row) for one
 /// source: `[sum gC S O (3), sum gc S O, sum gc O (S' - S A'/A), sum gc S dO/dd_y]` with
 /// `gc = dL/dC . Ilin(y) + dL/dW`. `OCC = false`: every receiver has `O = 1`. `FULL =
-/// false` (alpha = 0): only the alpha gradient's sum is needed. Also the span adjoint's
-/// ring runs (`engine/spans/adjoint/sources.rs`).
+/// false` (alpha = 0): only the alpha gradient's sum is needed.
 #[inline(always)]
-pub(in crate::engine) fn source_run<T: Real, const OCC: bool, const FULL: bool>(
+fn source_run<T: Real, const OCC: bool, const FULL: bool>(
     rcv: &Receivers<T>,
     i0: usize,
     gauge: &[T],

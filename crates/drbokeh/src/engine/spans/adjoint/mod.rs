@@ -60,8 +60,16 @@
 //! (issue 18's target is 3x). Those physical figures include a second (fast) forward, now
 //! a second span forward ("Recorded sums"): 512 px K 30 physical `vjp` 16.7 -> 10.6 s of
 //! CPU (load 15, same run, one run each). The soft disc's steps by table then took it to
-//! 5.8-6.5 s at low load (from 7.5-8.8, [`disc`]); what remains is mostly pass B's ring
-//! runs, the soft disc's rings and pass C.
+//! 5.8-6.5 s at low load (from 7.5-8.8, [`disc`]). Then pass B's rings in whole 8-lane
+//! chunks with lanes kept over the source (not re-reduced per run), the soft disc's rings
+//! and pass C in 8-lane chunks (the circle's table now holds both signs of `dx`), and the
+//! refinement of small weights as a plain AVX2 loop that reuses a row's `Z(r_c)`: 4.7-5.0
+//! -> 3.3-3.5 s of user CPU (wall 5.0-5.3 -> 3.6-3.7 s, load 4, alternating runs); at
+//! load 1.5, user + sys 5.3-5.4 -> 3.8-3.9 s, wall 3.0-3.1 -> 2.2 s, against the render's
+//! 0.45-0.54 s CPU and 0.31-0.36 s wall; paper 3.3-3.5 -> 2.3-2.6 s CPU. Gradients stay within 4.1e-6 of the exact adjoint's largest value of each
+//! kind there (before: 6.8e-6). The `vjp` is still about 7x its render: pass B costs
+//! ~100 cycles per source row of its reach (per-row bookkeeping more than taps), the soft
+//! disc's sums and pass C as much again.
 //!
 //! The recorded sums are the forward's (`C`, `W` within `2e-5` relative, see
 //! `spans/mod.rs`), so the chain rule's upstream factors carry the forward's error too; the

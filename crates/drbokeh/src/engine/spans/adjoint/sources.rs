@@ -19,9 +19,11 @@
 //! count decides it in O(1)); zero-alpha sources need only `sum gc S O` (their alpha
 //! gradient), the runs' alpha-only variant.
 
-use super::super::geometry::{disc_row, GaugeTable, Rings, Shape, STEP_ARGUMENT_MIN, TABLE_MARGIN};
+use super::super::geometry::{
+    disc_row, ring_step, GaugeTable, Rings, Shape, LANES, STEP_ARGUMENT_MIN, TABLE_MARGIN,
+};
 use crate::engine::fast::adjoint::{
-    gather_source_terms, source_run, Ctx, SourceGradients, SourceTerms,
+    gather_source_terms, Ctx, Receivers, SourceGradients, SourceTerms,
 };
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, SCATTER_TAIL_PX};
@@ -81,36 +83,96 @@ impl RowSet {
     }
 }
 
+/// The receivers' planes of pass B, each image row followed by [`LANES`] zero columns, so
+/// that a chunk of [`LANES`] receivers from any column of a row lies in the plane.
+struct PaddedRows<T> {
+    width: usize,
+    /// `width + LANES`.
+    stride: usize,
+    g_red: Vec<T>,
+    g_green: Vec<T>,
+    g_blue: Vec<T>,
+    g_weight: Vec<T>,
+    focus_weight: Vec<T>,
+    rel_disp: Vec<T>,
+}
+
+impl<T: Real> PaddedRows<T> {
+    fn new(rcv: &Receivers<T>) -> Self {
+        let (w, h) = (rcv.width, rcv.height);
+        let stride = w + LANES;
+        let pad = |v: &[T]| {
+            let mut out = vec![T::zero(); h * stride];
+            for y in 0..h {
+                out[y * stride..y * stride + w].copy_from_slice(&v[y * w..(y + 1) * w]);
+            }
+            out
+        };
+        PaddedRows {
+            width: w,
+            stride,
+            g_red: pad(&rcv.g_red),
+            g_green: pad(&rcv.g_green),
+            g_blue: pad(&rcv.g_blue),
+            g_weight: pad(&rcv.g_weight),
+            focus_weight: pad(&rcv.focus_weight),
+            rel_disp: pad(&rcv.rel_disp),
+        }
+    }
+}
+
 /// The receivers' side of pass B.
-struct RowData {
+struct RowData<T> {
+    /// The receivers' planes, padded for whole chunks.
+    rows: PaddedRows<T>,
     /// Prefix sums `[y][x][component]` (`w + 1` entries per row) of `gC` and `gW`.
     prefix: Vec<f64>,
     /// Receivers whose occlusion term is evaluated (`e(x) > 0` after the cutoff).
     focus: RowSet,
     /// Tail receivers (see the module documentation).
     tail: RowSet,
-    /// Summed-area count (`(h + 1) x (w + 1)`) of receivers with a non-zero `gC` or `gW`.
-    nonzero: Vec<u32>,
+    /// Receivers with a non-zero `gC` or `gW`.
+    nonzero: Area,
+    /// Tail receivers, as an area count.
+    tail_area: Area,
 }
 
-impl RowData {
-    /// Whether a receiver in image columns `x0 ..= x1`, rows `y0 ..= y1` (clipped) has a
-    /// non-zero upstream gradient.
-    fn any_nonzero(
-        &self,
-        w: usize,
-        h: usize,
-        (x0, x1): (isize, isize),
-        (y0, y1): (isize, isize),
-    ) -> bool {
-        let (x0, x1) = (x0.max(0) as usize, (x1 + 1).clamp(0, w as isize) as usize);
-        let (y0, y1) = (y0.max(0) as usize, (y1 + 1).clamp(0, h as isize) as usize);
+/// A summed-area count (`(h + 1) x (w + 1)`) of a set of receivers.
+struct Area {
+    width: usize,
+    height: usize,
+    count: Vec<u32>,
+}
+
+impl Area {
+    fn new(w: usize, h: usize, member: impl Fn(usize) -> bool) -> Self {
+        let s1 = w + 1;
+        let mut count = vec![0u32; (h + 1) * s1];
+        for y in 0..h {
+            let mut run = 0u32;
+            for x in 0..w {
+                run += u32::from(member(y * w + x));
+                count[(y + 1) * s1 + x + 1] = count[y * s1 + x + 1] + run;
+            }
+        }
+        Area {
+            width: w,
+            height: h,
+            count,
+        }
+    }
+
+    /// Whether a member lies in image columns `x0 ..= x1`, rows `y0 ..= y1` (clipped).
+    #[inline(always)]
+    fn any(&self, (x0, x1): (isize, isize), (y0, y1): (isize, isize)) -> bool {
+        let (w, h) = (self.width as isize, self.height as isize);
+        let (x0, x1) = (x0.max(0) as usize, (x1 + 1).clamp(0, w) as usize);
+        let (y0, y1) = (y0.max(0) as usize, (y1 + 1).clamp(0, h) as usize);
         if x0 >= x1 || y0 >= y1 {
             return false;
         }
-        let s1 = w + 1;
-        self.nonzero[y1 * s1 + x1] + self.nonzero[y0 * s1 + x0]
-            > self.nonzero[y0 * s1 + x1] + self.nonzero[y1 * s1 + x0]
+        let (s1, c) = (self.width + 1, &self.count);
+        c[y1 * s1 + x1] + c[y0 * s1 + x0] > c[y0 * s1 + x1] + c[y1 * s1 + x0]
     }
 }
 
@@ -147,20 +209,14 @@ pub(super) fn pass_sources<T: Real>(
             row
         })
         .collect();
-    let s1 = w + 1;
-    let mut nonzero = vec![0u32; (h + 1) * s1];
-    for y in 0..h {
-        let mut run = 0u32;
-        for x in 0..w {
-            run += u32::from(is_nonzero(y * w + x));
-            nonzero[(y + 1) * s1 + x + 1] = nonzero[y * s1 + x + 1] + run;
-        }
-    }
+    let is_tail = |i: usize| tail[i] && is_nonzero(i);
     let data = RowData {
+        rows: PaddedRows::new(rcv),
         prefix,
         focus: RowSet::new(w, h, |i| rcv.focus_weight[i] > T::zero()),
-        tail: RowSet::new(w, h, |i| tail[i] && is_nonzero(i)),
-        nonzero,
+        tail: RowSet::new(w, h, is_tail),
+        nonzero: Area::new(w, h, is_nonzero),
+        tail_area: Area::new(w, h, is_tail),
     };
     let rows: Vec<(Vec<[T; 5]>, f64)> = (0..src.rows)
         .into_par_iter()
@@ -178,7 +234,7 @@ avx2_dispatch!(
         shape: &Shape,
         table: &GaugeTable<T>,
         span_rows: &[bool],
-        data: &RowData,
+        data: &RowData<T>,
         py: usize
     ) -> (Vec<[T; 5]>, f64)
 );
@@ -198,6 +254,9 @@ struct Source<T> {
 /// sum gc S dO/dd_y]`.
 type Sums<T> = [T; 6];
 
+/// [`Sums`] in [`LANES`] partial sums each, kept over a whole source and reduced once.
+type LaneSums<T> = [[T; LANES]; 6];
+
 /// Pass B over the padded source row `py`: per padded pixel
 /// `[g_lin r, g, b, g_alpha, g_disp]` and K's share.
 #[inline(always)]
@@ -206,12 +265,11 @@ fn source_row<T: Real>(
     shape: &Shape,
     table: &GaugeTable<T>,
     span_rows: &[bool],
-    data: &RowData,
+    data: &RowData<T>,
     py: usize,
 ) -> (Vec<[T; 5]>, f64) {
     let src = ctx.src;
     let (stride, pad) = (src.stride, src.pad);
-    let (w, h) = (ctx.rcv.width, ctx.rcv.height);
     let k = ctx.k;
     let big_r = table.big_r as f64;
     let mut out = vec![[T::zero(); 5]; stride];
@@ -221,7 +279,10 @@ fn source_row<T: Real>(
         let (a, r) = (src.alpha[p], src.radius[p]);
         let (xs, ys) = (px as isize - pad as isize, py as isize - pad as isize);
         let reach = (r.f64() + TAP_ROW_TAIL_PX).min(big_r).floor() as isize;
-        if !data.any_nonzero(w, h, (xs - reach, xs + reach), (ys - reach, ys + reach)) {
+        if !data
+            .nonzero
+            .any((xs - reach, xs + reach), (ys - reach, ys + reach))
+        {
             continue;
         }
         let s = Source {
@@ -236,13 +297,10 @@ fn source_row<T: Real>(
             ys,
             full: a != T::zero(),
         };
+        let st = (shape, table);
         let acc = match src.step {
-            model::ScatterStep::Sharp => {
-                source_sums::<T, true>(ctx, shape, table, span_rows, data, s)
-            }
-            model::ScatterStep::Paper => {
-                source_sums::<T, false>(ctx, shape, table, span_rows, data, s)
-            }
+            model::ScatterStep::Sharp => source_sums::<T, true>(ctx, st, span_rows, data, s),
+            model::ScatterStep::Paper => source_sums::<T, false>(ctx, st, span_rows, data, s),
         };
         let inv_area = src.inv_area[p];
         let a_inv = a * inv_area;
@@ -324,67 +382,135 @@ fn exact_tap<T: Real, const SHARP: bool>(
     add_tap(ctx, src, i, (s, sd), o, acc);
 }
 
-/// The taps of receiver columns `xa ..= xb` of image row `yr` (row offset `dy`): 8-lane
-/// runs (the fast adjoint's), the centre tap (`O = 1`) scalar. Not recursive, so that it
-/// inlines into the caller's AVX2 code path.
+/// The taps of receiver columns `xa ..= xb` of image row `yr` (row offset `dy`) in chunks
+/// of [`LANES`] ([`run_chunks`]), the centre tap (`O = 1`) scalar. Not recursive, so that
+/// it inlines into the caller's AVX2 code path.
 #[inline(always)]
 fn run_taps<T: Real, const SHARP: bool>(
     ctx: &Ctx<'_, T>,
-    table: &GaugeTable<T>,
-    data: &RowData,
+    (table, data): (&GaugeTable<T>, &RowData<T>),
     src: &Source<T>,
     (yr, dy): (usize, isize),
     (xa, xb): (isize, isize),
-    acc: &mut Sums<T>,
+    (acc, lanes): (&mut Sums<T>, &mut LaneSums<T>),
 ) {
+    let at = (yr, dy);
     if dy == 0 && (xa..=xb).contains(&src.xs) {
-        run_part(ctx, data, src, (yr, dy), (xa, src.xs - 1), acc);
-        exact_tap::<T, SHARP>(ctx, table, src, (yr, dy), src.xs, acc);
-        run_part(ctx, data, src, (yr, dy), (src.xs + 1, xb), acc);
+        run_part::<T, SHARP>(table, data, src, at, (xa, src.xs - 1), lanes);
+        exact_tap::<T, SHARP>(ctx, table, src, at, src.xs, acc);
+        run_part::<T, SHARP>(table, data, src, at, (src.xs + 1, xb), lanes);
     } else {
-        run_part(ctx, data, src, (yr, dy), (xa, xb), acc);
+        run_part::<T, SHARP>(table, data, src, at, (xa, xb), lanes);
     }
 }
 
-/// [`run_taps`] over columns `xa ..= xb` that do not hold the centre tap.
+/// [`run_taps`] over columns `xa ..= xb` that do not hold the centre tap: [`run_chunks`]
+/// with or without the occlusion term (whether a receiver of the run has `e > 0`).
 #[inline(always)]
-fn run_part<T: Real>(
-    ctx: &Ctx<'_, T>,
-    data: &RowData,
+fn run_part<T: Real, const SHARP: bool>(
+    table: &GaugeTable<T>,
+    data: &RowData<T>,
+    src: &Source<T>,
+    at: (usize, isize),
+    cols: (isize, isize),
+    lanes: &mut LaneSums<T>,
+) {
+    if cols.0 > cols.1 {
+        return;
+    }
+    let occ = data.focus.any(data.rows.width, at.0, cols);
+    let td = (table, data);
+    match (occ, src.full) {
+        (true, true) => run_chunks::<T, SHARP, true, true>(td, src, at, cols, lanes),
+        (true, false) => run_chunks::<T, SHARP, true, false>(td, src, at, cols, lanes),
+        (false, true) => run_chunks::<T, SHARP, false, true>(td, src, at, cols, lanes),
+        (false, false) => run_chunks::<T, SHARP, false, false>(td, src, at, cols, lanes),
+    }
+}
+
+/// Pass B's terms of the taps of receiver columns `xa ..= xb` (none the centre) of image
+/// row `yr` (row offset `dy`), added to the source's lanes: whole chunks of [`LANES`]
+/// receivers (the padded rows, [`PaddedRows`]), the lanes past `xb` masked to 0 with the
+/// window mask ([`ring_step`]), so that every chunk is one branch-free vector body. Lane
+/// `l` of the chunk from column `x0` sums the tap `x0 + l`: a fixed order (the same bytes
+/// for any thread count and vector width). `OCC = false`: every receiver has `O = 1`;
+/// `FULL = false` (alpha = 0): only `sum gc S O`.
+#[inline(always)]
+fn run_chunks<T: Real, const SHARP: bool, const OCC: bool, const FULL: bool>(
+    (table, data): (&GaugeTable<T>, &RowData<T>),
     src: &Source<T>,
     (yr, dy): (usize, isize),
     (xa, xb): (isize, isize),
-    acc: &mut Sums<T>,
+    lanes: &mut LaneSums<T>,
 ) {
-    if xa > xb {
-        return;
-    }
-    let w = ctx.rcv.width;
-    let big_r = ctx.tables.big_r as isize;
-    let occ = data.focus.any(w, yr, (xa, xb));
-    let (i0, n) = (yr * w + xa as usize, (xb - xa + 1) as usize);
-    let g0 = (xa - src.xs + big_r) as usize;
-    let gauge = &ctx.gauge_flip[(dy + big_r) as usize][g0..g0 + n];
-    let rcv = ctx.rcv;
-    let v = match (occ, src.full) {
-        (true, true) => source_run::<T, true, true>(rcv, i0, gauge, src.terms),
-        (true, false) => source_run::<T, true, false>(rcv, i0, gauge, src.terms),
-        (false, true) => source_run::<T, false, true>(rcv, i0, gauge, src.terms),
-        (false, false) => source_run::<T, false, false>(rcv, i0, gauge, src.terms),
+    let rows = &data.rows;
+    let terms = src.terms;
+    let step = if SHARP {
+        model::ScatterStep::Sharp
+    } else {
+        model::ScatterStep::Paper
     };
-    for (a, b) in acc.iter_mut().zip(v) {
-        *a = *a + b;
+    let mut x0 = xa;
+    while x0 <= xb {
+        let n = (xb - x0 + 1).min(LANES as isize) as usize;
+        let (g, m) = (
+            table.chunk(dy, x0 - src.xs),
+            table.mask_chunk(dy, x0 - src.xs),
+        );
+        let at = yr * rows.stride + x0 as usize;
+        let (gr, gg, gb, gw) = (
+            load(&rows.g_red, at),
+            load(&rows.g_green, at),
+            load(&rows.g_blue, at),
+            load(&rows.g_weight, at),
+        );
+        let (e, dx) = (load(&rows.focus_weight, at), load(&rows.rel_disp, at));
+        for l in 0..LANES {
+            let keep = if l < n { m[l] } else { T::zero() };
+            let s = ring_step::<T, SHARP>(terms.radius, g[l], keep);
+            let (o, d_o) = if OCC {
+                model::occlusion_fast_with_derivative(e[l], terms.rel_disp, dx[l])
+            } else {
+                (T::one(), T::zero())
+            };
+            let gc = gr[l] * terms.lin[0] + gg[l] * terms.lin[1] + gb[l] * terms.lin[2] + gw[l];
+            let so = s * o;
+            lanes[3][l] = lanes[3][l] + gc * so;
+            if FULL {
+                lanes[0][l] = lanes[0][l] + gr[l] * so;
+                lanes[1][l] = lanes[1][l] + gg[l] * so;
+                lanes[2][l] = lanes[2][l] + gb[l] * so;
+                let sd = model::scatter_step_derivative(step, s);
+                lanes[4][l] = lanes[4][l]
+                    + gc * o * model::normalised_scatter_radius_factor(s, sd, terms.dlog_area);
+                if OCC {
+                    lanes[5][l] = lanes[5][l] + gc * s * d_o;
+                }
+            }
+        }
+        x0 += LANES as isize;
     }
+}
+
+/// The [`LANES`] values of `v` from index `at`.
+#[inline(always)]
+fn load<T: Real>(v: &[T], at: usize) -> &[T; LANES] {
+    v[at..at + LANES].try_into().expect("LANES")
+}
+
+/// Image columns `xs + lo ..= xs + hi`, clipped to the image's `w` columns.
+#[inline(always)]
+fn clip(xs: isize, w: isize, (lo, hi): (isize, isize)) -> (isize, isize) {
+    ((xs + lo).max(0), (xs + hi).min(w - 1))
 }
 
 /// Pass B's sums of one source over its disc.
 #[inline(always)]
 fn source_sums<T: Real, const SHARP: bool>(
     ctx: &Ctx<'_, T>,
-    shape: &Shape,
-    table: &GaugeTable<T>,
+    (shape, table): (&Shape, &GaugeTable<T>),
     span_rows: &[bool],
-    data: &RowData,
+    data: &RowData<T>,
     src: Source<T>,
 ) -> Sums<T> {
     let (w, h) = (ctx.rcv.width as isize, ctx.rcv.height as isize);
@@ -392,6 +518,12 @@ fn source_sums<T: Real, const SHARP: bool>(
     let rf = src.terms.radius.f64();
     let reach = (rf + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize;
     let mut acc: Sums<T> = [T::zero(); 6];
+    let mut lanes: LaneSums<T> = [[T::zero(); LANES]; 6];
+    // Whether a tail receiver lies within the reach's bounding box at all.
+    let tails = data.tail_area.any(
+        (src.xs - reach, src.xs + reach),
+        (src.ys - reach, src.ys + reach),
+    );
     // Interior sums of gC and gW (S = 1, O = 1).
     let mut interior = [0.0f64; COMPONENTS];
     for dy in -reach..=reach {
@@ -403,41 +535,44 @@ fn source_sums<T: Real, const SHARP: bool>(
             continue;
         };
         let yr = yr as usize;
-        let clip = |(lo, hi): (isize, isize)| ((src.xs + lo).max(0), (src.xs + hi).min(w - 1));
         // Every tap within the fast adjoint's reach on this row.
         let Some((lo, hi)) = shape.interval(rf + TAP_ROW_TAIL_PX, dy, -1.0) else {
             continue;
         };
         let hwi = hw as isize;
-        let (fa, fb) = clip((lo.max(-hwi), hi.min(hwi)));
+        let (fa, fb) = clip(src.xs, w, (lo.max(-hwi), hi.min(hwi)));
         if fa > fb {
             continue;
         }
+        let td = (table, data);
         if !span_rows[yr] {
-            run_taps::<T, SHARP>(ctx, table, data, &src, (yr, dy), (fa, fb), &mut acc);
+            let sums = (&mut acc, &mut lanes);
+            run_taps::<T, SHARP>(ctx, td, &src, (yr, dy), (fa, fb), sums);
             continue;
         }
         let disc = disc_row(shape, rings, rf, dy, hw, -1.0);
-        // The columns the forward's disc row covers (image columns; empty if none).
-        let (da, db) = match disc {
-            None => (fb + 1, fb),
-            Some(d) => {
-                let first = d.left.or(d.interior).map_or(0, |r| r.0);
-                let last = d.right.or(d.interior).or(d.left).map_or(-1, |r| r.1);
-                clip((first, last))
-            }
-        };
-        // Tail receivers beyond the forward's ring: exact taps.
-        for part in [(fa, fb.min(da - 1)), (fa.max(db + 1), fb)] {
-            for &x in data.tail.within(ctx.rcv.width, yr, part) {
-                exact_tap::<T, SHARP>(ctx, table, &src, (yr, dy), x as isize, &mut acc);
+        if tails {
+            // The columns the forward's disc row covers (image columns; empty if none).
+            let (da, db) = match disc {
+                None => (fb + 1, fb),
+                Some(d) => {
+                    let first = d.left.or(d.interior).map_or(0, |r| r.0);
+                    let last = d.right.or(d.interior).or(d.left).map_or(-1, |r| r.1);
+                    clip(src.xs, w, (first, last))
+                }
+            };
+            // Tail receivers beyond the forward's ring: exact taps.
+            for part in [(fa, fb.min(da - 1)), (fa.max(db + 1), fb)] {
+                for &x in data.tail.within(ctx.rcv.width, yr, part) {
+                    exact_tap::<T, SHARP>(ctx, table, &src, (yr, dy), x as isize, &mut acc);
+                }
             }
         }
         let Some(disc) = disc else {
             continue;
         };
         if let Some(run) = disc.interior {
-            let (xa, xb) = clip(run);
+            let (xa, xb) = clip(src.xs, w, run);
             if xa <= xb {
                 let row = &data.prefix[yr * (ctx.rcv.width + 1) * COMPONENTS..];
                 let (ia, ib) = (xa as usize * COMPONENTS, (xb as usize + 1) * COMPONENTS);
@@ -462,9 +597,21 @@ fn source_sums<T: Real, const SHARP: bool>(
                 }
             }
         }
-        for run in [disc.left, disc.right].into_iter().flatten() {
-            run_taps::<T, SHARP>(ctx, table, data, &src, (yr, dy), clip(run), &mut acc);
+        let ring = [disc.left, disc.right];
+        for k in 0..2 {
+            if let Some(run) = ring[k] {
+                let sums = (&mut acc, &mut lanes);
+                run_taps::<T, SHARP>(ctx, td, &src, (yr, dy), clip(src.xs, w, run), sums);
+            }
         }
+    }
+    // The runs' lanes, in lane order.
+    for c in 0..6 {
+        let mut sum = T::zero();
+        for l in 0..LANES {
+            sum = sum + lanes[c][l];
+        }
+        acc[c] = acc[c] + sum;
     }
     // The interior's terms: S = 1, S' = 0, O = 1.
     let ic: [T; COMPONENTS] = interior.map(T::c);
