@@ -155,6 +155,36 @@ fn spans_match_fast_where_large_radii_repeat() {
     }
 }
 
+/// Continuously varying radii (no two sources share a profile), where a circle's sources
+/// are added in blocks across the sources (`scatter/blocks.rs`): the GEGL workload (radii
+/// 3 to 33 px), and a layer whose radius jumps between columns (blocks cut at depth edges,
+/// interiors and outer ends differing within a block), partially transparent, both
+/// presets.
+#[test]
+fn spans_match_fast_where_radii_vary_continuously() {
+    for preset in [drbokeh::Preset::Physical, drbokeh::Preset::Paper] {
+        let (stack, s) = drbokeh::bench::gegl_workload(120, 96, preset);
+        check(&stack, &s, &format!("gegl workload {preset:?}"));
+    }
+    let (w, h) = (101, 77);
+    let mut layer = Layer::<f32>::constant(w, h, [0.3, 0.6, 0.2], 0.0, 1.0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let jump = if (x / 5 + y / 13) % 2 == 0 { 0.0 } else { 0.45 };
+            layer.disparity.data[i] = 0.05 + 0.4 * x as f32 / w as f32 + jump;
+            layer.alpha.data[i] = if (x + 2 * y) % 7 == 0 { 0.4 } else { 1.0 };
+            for c in 0..3 {
+                layer.rgb_encoded.data[3 * i + c] = ((x / 3 + y / 4 + c) % 3) as f32 / 2.0;
+            }
+        }
+    }
+    let stack = LayerStack::new(vec![layer]).unwrap();
+    for s in presets(settings(0.0, 40.0, 81, Aperture::Circle)) {
+        check(&stack, &s, &format!("radius jumps {:?}", s.preset));
+    }
+}
+
 /// Odd and tiny sizes (single rows and columns, fewer pixels than the blur radius), where
 /// every pixel is an edge pixel and the mirror padding holds most of the disc.
 #[test]

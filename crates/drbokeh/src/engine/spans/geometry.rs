@@ -346,6 +346,31 @@ impl ExpTable {
         self.scale * (self.rate * (self.centre - r)).exp()
     }
 
+    /// The table's factor `e^{a (g - m)}` at offset `(dx, dy)`, `|dx| <= R + 2 LANES`,
+    /// `|dy| <= R` (0 outside the window).
+    #[inline(always)]
+    pub fn factor_at(&self, dy: isize, dx: isize) -> f64 {
+        self.factor[dy.unsigned_abs() * self.stride + (self.origin as isize + dx) as usize]
+    }
+
+    /// The step at one offset with table factor `f > 0` ([`ExpTable::factor_at`]) for
+    /// [`LANES`] sources with factors `e_r`, times `keep` (1 or 0 per lane): where kept,
+    /// the same values as [`ExpTable::steps`]. Branch-free.
+    #[inline(always)]
+    pub fn steps_across<T: Real>(
+        &self,
+        f: f64,
+        e_r: &[f64; LANES],
+        keep: &[T; LANES],
+    ) -> [T; LANES] {
+        let mut s = [T::zero(); LANES];
+        for l in 0..LANES {
+            let t = T::c((f * e_r[l]).min(self.max));
+            s[l] = keep[l] / (T::one() + t);
+        }
+        s
+    }
+
     /// The steps of a source with factor `e_r` ([`ExpTable::source_factor`]) at the
     /// [`LANES`] offsets `(dx0 + l, dy)`, `-R - 2 LANES <= dx0 <= R + LANES`, times the
     /// window mask (0 outside).
