@@ -313,7 +313,7 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
                     continue;
                 }
                 if let Some(exp) = blocks {
-                    work += blocks::add_blocks(ctx, exp, &sources, ady, rows, acc);
+                    work += blocks::add_blocks(ctx, exp, (&sources, &profiles.v64), ady, rows, acc);
                     continue;
                 }
                 work += scatter_rows_circle::<T, SHARP, FOCUS>(

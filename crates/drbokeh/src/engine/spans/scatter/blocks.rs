@@ -53,12 +53,12 @@ fn row_ends<T: Real>(
 }
 
 /// Adds the disc rows `+-ady` (`rows`: their sub-band rows) of every source of a source
-/// row, block by block. Returns the work done (ring lanes plus span writes).
+/// row (`v64`: their weights in f64, `[source][component]`), block by block. Returns the work done (ring lanes plus span writes).
 #[inline(always)]
 pub(super) fn add_blocks<T: Real>(
     ctx: &BandLayer<'_, T>,
     exp: &ExpTable,
-    sources: &[Source<T>],
+    (sources, v64): (&[Source<T>], &[f64]),
     ady: isize,
     rows: [Option<usize>; 2],
     acc: &mut Acc<T>,
@@ -81,6 +81,7 @@ pub(super) fn add_blocks<T: Real>(
         let mut v = [[T::zero(); LANES]; COMPONENTS];
         let (mut hi_min, mut ho_max, mut widest) = (isize::MAX, -1isize, 0isize);
         let mut j = i;
+        let mut live = 0;
         while j < sources.len() && j - i < LANES && sources[j].xs == x0 + (j - i) as isize {
             let src = &sources[j];
             let ends = match carried.take() {
@@ -94,6 +95,7 @@ pub(super) fn add_blocks<T: Real>(
                     break;
                 }
                 (hi_min, ho_max, widest) = (lo2, hi2, wide2);
+                live += 1;
                 let l = j - i;
                 e_r[l] = src.e_r;
                 ho[l] = T::c(o as f64);
@@ -104,11 +106,29 @@ pub(super) fn add_blocks<T: Real>(
             j += 1;
         }
         let block = &sources[i..j];
+        let i0 = i;
         i = j;
         if ho_max < 0 {
             continue;
         }
-        if hi_min >= 0 {
+        let n = block.len();
+        let (xa, xb1) = (x0 - hi_min, x0 + hi_min + 1);
+        if hi_min >= 0 && live == n && xa >= 0 && xb1 + n as isize - 1 <= w {
+            // Every source's span unclipped: source l adds its weights at xa + l and
+            // subtracts them at xb1 + l, as two contiguous vector passes per row.
+            let v = &v64[i0 * COMPONENTS..(i0 + n) * COMPONENTS];
+            let (a, b) = (xa as usize * COMPONENTS, xb1 as usize * COMPONENTS);
+            for row in rows.into_iter().flatten() {
+                let d = &mut acc.diff[row * (acc.width + 1) * COMPONENTS..];
+                for (o, v) in d[a..a + v.len()].iter_mut().zip(v) {
+                    *o += *v;
+                }
+                for (o, v) in d[b..b + v.len()].iter_mut().zip(v) {
+                    *o -= *v;
+                }
+                work += 2 * n as u64;
+            }
+        } else if hi_min >= 0 {
             for (l, src) in block.iter().enumerate() {
                 if ho[l] >= T::zero() {
                     for row in rows.into_iter().flatten() {
