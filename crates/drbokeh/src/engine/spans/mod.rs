@@ -36,8 +36,10 @@
 //!    `B`, the coverage `o` and `1 - o` (weighted means of non-negative values) err by at
 //!    most `2e-5` relative, and the composite by at most `2e-5 (2L + 1)` relative for `L`
 //!    layers.
-//! 2. Tail beyond `r + u_out` dropped (paper: the fast engine's 4.5 px; sharp: 2.75 px,
-//!    `S <= 6.8e-8` per tap): as the fast engine.
+//! 2. Tail beyond `r + u_out` dropped (paper: the fast engine's 4.5 px; sharp: 2.3 px,
+//!    `S <= 1.01e-6` per tap, at most `6.4e-6` of a source's weight,
+//!    [`geometry::Rings::forward`]): as the fast engine, which keeps the sharp tail to
+//!    4.5 px.
 //! 3. Occlusion: receivers with `e(x) < 1e-6` take `O = 1` (relative error below `1e-6`);
 //!    in-focus receivers interpolate the depth step at Chebyshev points in their own
 //!    disparity, `|error| <= 1e-6` per tap, so `C`, `W` err by at most `2e-6 e P`, with `P`
@@ -131,7 +133,7 @@ pub(crate) fn render_recording_to<T: Real>(
     outer_px: Option<f64>,
 ) -> (Image<T>, SpanStats, Option<SpanRecording<T>>) {
     let rings = {
-        let forward = Rings::of(settings.model().step);
+        let forward = Rings::forward(settings.model().step);
         Rings {
             inner_px: forward.inner_px,
             outer_px: outer_px.unwrap_or(forward.outer_px),
