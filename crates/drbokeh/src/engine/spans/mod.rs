@@ -24,7 +24,11 @@
 //! adjacent columns sharing a profile is added as whole vectors (`scatter/runs.rs`: the
 //! span writes as shifted copies of the run's weights, the ring as one convolution of
 //! the weights with the profile's taps, once for rows `+-dy`), not source by source: the
-//! same terms, summed in another fixed order. A circle's
+//! same terms, summed in another fixed order. A source row of mostly distinct radii
+//! (radii that vary continuously) is added in blocks of up to 8 adjacent sources instead,
+//! vectorised across the sources (`scatter/blocks.rs`): one vector of steps per ring
+//! column, the block's interior its smallest (columns beyond a source's own interior
+//! evaluated exactly). A circle's
 //! ring steps come from a table of exponentials over the window times one exponential
 //! per source ([`geometry::ExpTable`]), not from an `exp` per tap: no new approximation
 //! (closer to the exact step than the per-tap `exp`).
