@@ -24,7 +24,11 @@
 //! adjacent columns sharing a profile is added as whole vectors (`scatter/runs.rs`: the
 //! span writes as shifted copies of the run's weights, the ring as one convolution of
 //! the weights with the profile's taps, once for rows `+-dy`), not source by source: the
-//! same terms, summed in another fixed order. A circle's
+//! same terms, summed in another fixed order. A source row of mostly distinct radii
+//! (radii that vary continuously) is added in blocks of up to 8 adjacent sources instead,
+//! vectorised across the sources (`scatter/blocks.rs`): one vector of steps per ring
+//! column, the block's interior its smallest (columns beyond a source's own interior
+//! evaluated exactly). A circle's
 //! ring steps come from a table of exponentials over the window times one exponential
 //! per source ([`geometry::ExpTable`]), not from an `exp` per tap: no new approximation
 //! (closer to the exact step than the per-tap `exp`).
@@ -36,8 +40,10 @@
 //!    `B`, the coverage `o` and `1 - o` (weighted means of non-negative values) err by at
 //!    most `2e-5` relative, and the composite by at most `2e-5 (2L + 1)` relative for `L`
 //!    layers.
-//! 2. Tail beyond `r + u_out` dropped (paper: the fast engine's 4.5 px; sharp: 2.75 px,
-//!    `S <= 6.8e-8` per tap): as the fast engine.
+//! 2. Tail beyond `r + u_out` dropped (paper: the fast engine's 4.5 px; sharp: 2.3 px,
+//!    `S <= 1.01e-6` per tap, at most `6.4e-6` of a source's weight,
+//!    [`geometry::Rings::forward`]): as the fast engine, which keeps the sharp tail to
+//!    4.5 px.
 //! 3. Occlusion: receivers with `e(x) < 1e-6` take `O = 1` (relative error below `1e-6`);
 //!    in-focus receivers interpolate the depth step at Chebyshev points in their own
 //!    disparity, `|error| <= 1e-6` per tap, so `C`, `W` err by at most `2e-6 e P`, with `P`
@@ -131,7 +137,7 @@ pub(crate) fn render_recording_to<T: Real>(
     outer_px: Option<f64>,
 ) -> (Image<T>, SpanStats, Option<SpanRecording<T>>) {
     let rings = {
-        let forward = Rings::of(settings.model().step);
+        let forward = Rings::forward(settings.model().step);
         Rings {
             inner_px: forward.inner_px,
             outer_px: outer_px.unwrap_or(forward.outer_px),

@@ -19,6 +19,7 @@ use crate::model::{self, LayerAtPixel, ScatterStep};
 use crate::Real;
 use runs::{add_run, RunScratch, RUN_MIN};
 
+mod blocks;
 mod runs;
 
 /// Receiver rows per sub-band (one task, one set of accumulators).
@@ -290,6 +291,11 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
                 }
             }
         }
+        // Mostly distinct radii (no shared profiles): blocks across the sources.
+        let blocks = match ctx.exp {
+            Some(e) if circle && !FOCUS && 2 * profiles.segments.len() > sources.len() => Some(e),
+            _ => None,
+        };
         let (dy0, dy1) = (lo.max(-max_reach), hi.min(max_reach));
         if circle {
             // Rows dy and -dy share their intervals and ring profile.
@@ -304,6 +310,10 @@ fn scatter_sources<T: Real, const SHARP: bool, const FOCUS: bool>(
                     [ady, -ady].map(|dy| (dy >= dy0 && dy <= dy1).then(|| (ys + dy) as usize - y0));
                 let rows = [rows[0], if ady == 0 { None } else { rows[1] }];
                 if rows == [None, None] {
+                    continue;
+                }
+                if let Some(exp) = blocks {
+                    work += blocks::add_blocks(ctx, exp, (&sources, &profiles.v64), ady, rows, acc);
                     continue;
                 }
                 work += scatter_rows_circle::<T, SHARP, FOCUS>(
