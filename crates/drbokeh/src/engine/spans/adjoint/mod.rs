@@ -72,7 +72,7 @@
 //! soft disc's sums and pass C as much again. So runs of 8 sources (receivers) of one
 //! radius in adjacent columns now share their row geometry and each ring step
 //! (`sources/runs.rs`; [`disc`]'s groups): 512 px K 30 physical, user CPU 2.7-3.5 ->
-//! 1.5-1.7 s (load 4, alternating runs); gradients as before (within 1.4e-5 of the exact
+//! 1.5-2.1 s (load 4-4.5, alternating runs; paper 1.85-1.9 -> 1.5-1.6 s); gradients as before (within 1.4e-5 of the exact
 //! adjoint's largest value of each kind).
 //!
 //! The recorded sums are the forward's (`C`, `W` within `2e-5` relative, see
