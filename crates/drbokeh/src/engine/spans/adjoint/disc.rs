@@ -13,6 +13,10 @@
 //!   tap by tap, in bands of source rows (one task each, receivers in a fixed order: the
 //!   same bytes for any thread count).
 //!
+//! Runs of [`LANES`] receivers of one coverage radius in adjacent columns (a layer of
+//! constant or row-constant disparity) share one disc: both directions then evaluate each
+//! ring step once per offset for the whole run ([`group_sums`], [`group_scatter`]).
+//!
 //! **Bound.** The interior's `S := 1` overestimates each interior tap by at most `1e-5` of
 //! itself, so `o`, `Z` and pass C's sums err by at most `2e-5` relative (as the forward's
 //! soft disc, `spans/mod.rs`); the dropped interior `S'` integrates along each ray to at
@@ -272,8 +276,14 @@ fn disc_sums_row<T: Real>(ctx: &DiscCtx<'_, T>, prefix: &[f64], y: usize) -> Vec
     // A plain loop: an iterator adapter's closure would be compiled apart from this
     // function and lose its AVX2 code path.
     let mut out = Vec::with_capacity(ctx.width);
-    for x in 0..ctx.width {
+    let mut x = 0;
+    while x < ctx.width {
         let i = y * ctx.width + x;
+        if x + LANES <= ctx.width && equal_radii(&ctx.rc[i..i + LANES]) {
+            group_sums(ctx, prefix, (x, y), &mut out);
+            x += LANES;
+            continue;
+        }
         let xi = src.index(x, y);
         let (r_c, dr) = ctx.rc[i];
         let rc = RadiusTerms {
@@ -324,8 +334,171 @@ fn disc_sums_row<T: Real>(ctx: &DiscCtx<'_, T>, prefix: &[f64], y: usize) -> Vec
             d_alpha_sum: T::c(da_sum),
             d_weight: T::c(d_weight),
         });
+        x += 1;
     }
     out
+}
+
+/// Whether the [`LANES`] receivers share one coverage radius `r_c` (bitwise).
+#[inline(always)]
+fn equal_radii<T: Real>(rc: &[(T, T)]) -> bool {
+    let r0 = rc[0].0;
+    let mut same = true;
+    for &(r, _) in rc {
+        same &= r == r0;
+    }
+    same
+}
+
+/// [`disc_sums`] of the [`LANES`] receivers `x0 ..` of image row `y`, which share one
+/// coverage radius `r_c` and so one disc: the same taps at the same offsets, lane `l` the
+/// receiver `x0 + l`. Each ring step `S` (and `S'`) is evaluated once per offset for the
+/// whole group and multiplied into [`LANES`] alphas read as one vector (the alphas under
+/// offset `dx` of receivers `x0 ..= x0 + 7` are adjacent); `Z` and `sum S'` are the same
+/// for every receiver of the group. The same terms as receiver by receiver, summed in
+/// another fixed order (the ring's per row, as [`FLUSH_ROWS`] rows there), and `S' dr` as
+/// `(sum S' a) dr`.
+#[inline(always)]
+fn group_sums<T: Real>(
+    ctx: &DiscCtx<'_, T>,
+    prefix: &[f64],
+    (x0, y): (usize, usize),
+    out: &mut Vec<DiscCoverage<T>>,
+) {
+    let src = ctx.src;
+    let s1 = src.stride + 1;
+    let i0 = y * ctx.width + x0;
+    let xi = src.index(x0, y);
+    let r_c = ctx.rc[i0].0;
+    let e_r = ctx.factor(r_c);
+    let step = src.step;
+    // Per receiver: sum S a, sum S' a (f64 across rows; T within a row's ring).
+    let (mut a_sum, mut da_sum) = ([0.0f64; LANES], [0.0f64; LANES]);
+    // Shared: Z and sum S'.
+    let (mut weight, mut d_weight) = (0.0f64, 0.0f64);
+    let reach = ctx.reach(r_c.f64());
+    for dy in -reach..=reach {
+        let Some(((lo, hi), interior)) = ctx.row(r_c.f64(), dy) else {
+            continue;
+        };
+        let row = (xi as isize + dy * src.stride as isize) as usize;
+        let (mut la, mut lda) = ([T::zero(); LANES], [T::zero(); LANES]);
+        let (mut ls, mut lds) = (T::zero(), T::zero());
+        let parts = match interior {
+            None => [(lo, hi), (1, 0)],
+            Some((ia, ib)) => {
+                let base = (y as isize + src.pad as isize + dy) as usize * s1;
+                let cx = (x0 + src.pad) as isize;
+                let (ca, cb) = ((cx + ia) as usize, (cx + ib) as usize);
+                let (pa, pb) = (&prefix[base + ca..], &prefix[base + cb + 1..]);
+                for l in 0..LANES {
+                    a_sum[l] += pb[l] - pa[l];
+                }
+                weight += (ib - ia + 1) as f64;
+                [(lo, ia - 1), (ib + 1, hi)]
+            }
+        };
+        for (a, b) in parts {
+            let mut dx0 = a;
+            while dx0 <= b {
+                let n = (b - dx0 + 1).min(LANES as isize) as usize;
+                let s = ctx.steps((dx0, dy), n, r_c, e_r);
+                for k in 0..n {
+                    let sd = model::scatter_step_derivative(step, s[k]);
+                    let at = (row as isize + dx0) as usize + k;
+                    let al: &[T; LANES] = src.alpha[at..at + LANES].try_into().expect("LANES");
+                    for l in 0..LANES {
+                        la[l] = la[l] + s[k] * al[l];
+                        lda[l] = lda[l] + sd * al[l];
+                    }
+                    ls = ls + s[k];
+                    lds = lds + sd;
+                }
+                dx0 += LANES as isize;
+            }
+        }
+        for l in 0..LANES {
+            a_sum[l] += la[l].f64();
+            da_sum[l] += lda[l].f64();
+        }
+        weight += ls.f64();
+        d_weight += lds.f64();
+    }
+    for l in 0..LANES {
+        let dr = ctx.rc[i0 + l].1;
+        out.push(DiscCoverage {
+            alpha_sum: T::c(a_sum[l]),
+            weight: T::c(weight),
+            d_alpha_sum: T::c(da_sum[l]) * dr,
+            d_weight: T::c(d_weight) * dr,
+        });
+    }
+}
+
+/// Pass C of the [`LANES`] receivers `qx ..` of image row `qy`, which share one coverage
+/// radius (as [`group_sums`]), into the band's source rows `y0 .. y1` (`out`, `diff` as in
+/// [`coverage_band`]): each ring step once per offset for the group, multiplied into the
+/// [`LANES`] shares and added to the adjacent entries under it; the interiors' spans as
+/// [`LANES`] pairs of writes into the difference array. The same terms (`share S` rounded
+/// to `T`, then added in f64) as receiver by receiver, added in another fixed order.
+#[inline(always)]
+fn group_scatter<T: Real>(
+    ctx: &DiscCtx<'_, T>,
+    sh: &[T],
+    (qx, qy): (usize, usize),
+    (y0, y1, out, diff): (usize, usize, &mut [f64], &mut [f64]),
+) {
+    let src = ctx.src;
+    let stride = src.stride;
+    let mut any = false;
+    for l in 0..LANES {
+        any |= sh[l] != T::zero();
+    }
+    if !any {
+        return;
+    }
+    let r_c = ctx.rc[qy * ctx.width + qx].0;
+    let e_r = ctx.factor(r_c);
+    let (cy, cx) = (qy + src.pad, qx + src.pad);
+    let (dy0, dy1) = (y0 as isize - cy as isize, y1 as isize - 1 - cy as isize);
+    let reach = ctx.reach(r_c.f64());
+    for dy in (-reach).max(dy0)..=reach.min(dy1) {
+        let Some(((lo, hi), interior)) = ctx.row(r_c.f64(), dy) else {
+            continue;
+        };
+        let r = (cy as isize + dy) as usize - y0;
+        let parts = match interior {
+            None => [(lo, hi), (1, 0)],
+            Some((ia, ib)) => {
+                let d = &mut diff[r * (stride + 1)..];
+                let (a, b) = ((cx as isize + ia) as usize, (cx as isize + ib + 1) as usize);
+                for l in 0..LANES {
+                    d[a + l] += sh[l].f64();
+                }
+                for l in 0..LANES {
+                    d[b + l] -= sh[l].f64();
+                }
+                [(lo, ia - 1), (ib + 1, hi)]
+            }
+        };
+        let out_row = &mut out[r * stride..(r + 1) * stride + LANES];
+        for (a, b) in parts {
+            let mut dx0 = a;
+            while dx0 <= b {
+                let n = (b - dx0 + 1).min(LANES as isize) as usize;
+                let s = ctx.steps((dx0, dy), n, r_c, e_r);
+                for k in 0..n {
+                    let at = (cx as isize + dx0) as usize + k;
+                    let o: &mut [f64; LANES] =
+                        (&mut out_row[at..at + LANES]).try_into().expect("LANES");
+                    for l in 0..LANES {
+                        o[l] += (sh[l] * s[k]).f64();
+                    }
+                }
+                dx0 += LANES as isize;
+            }
+        }
+    }
 }
 
 /// Pass C for the soft disc: per image pixel, `sum_x share(x) S(r_c(x), y)` over the
@@ -363,8 +536,18 @@ fn coverage_band<T: Real>(ctx: &DiscCtx<'_, T>, share: &[T], y0: usize) -> Vec<f
     let q0 = (y0 as isize - pad as isize - big_r as isize).max(0) as usize;
     let q1 = ((y1 + big_r) as isize - pad as isize).clamp(0, h as isize) as usize;
     for qy in q0..q1 {
+        let mut next = 0;
         for qx in 0..w {
+            if qx < next {
+                continue;
+            }
             let i = qy * w + qx;
+            if qx + LANES <= w && equal_radii(&ctx.rc[i..i + LANES]) {
+                let band = (y0, y1, &mut out[..], &mut diff[..]);
+                group_scatter(ctx, &share[i..i + LANES], (qx, qy), band);
+                next = qx + LANES;
+                continue;
+            }
             let sh = share[i];
             if sh == T::zero() {
                 continue;

@@ -67,9 +67,13 @@
 //! -> 3.3-3.5 s of user CPU (wall 5.0-5.3 -> 3.6-3.7 s, load 4, alternating runs); at
 //! load 1.5, user + sys 5.3-5.4 -> 3.8-3.9 s, wall 3.0-3.1 -> 2.2 s, against the render's
 //! 0.45-0.54 s CPU and 0.31-0.36 s wall; paper 3.3-3.5 -> 2.3-2.6 s CPU. Gradients stay within 4.1e-6 of the exact adjoint's largest value of each
-//! kind there (before: 6.8e-6). The `vjp` is still about 7x its render: pass B costs
-//! ~100 cycles per source row of its reach (per-row bookkeeping more than taps), the soft
-//! disc's sums and pass C as much again.
+//! kind there (before: 6.8e-6). The `vjp` was then still about 7x its render: pass B
+//! cost ~100 cycles per source row of its reach (per-row bookkeeping more than taps), the
+//! soft disc's sums and pass C as much again. So runs of 8 sources (receivers) of one
+//! radius in adjacent columns now share their row geometry and each ring step
+//! (`sources/runs.rs`; [`disc`]'s groups): 512 px K 30 physical, user CPU 2.7-3.5 ->
+//! 1.5-2.1 s (load 4-4.5, alternating runs; paper 1.85-1.9 -> 1.5-1.6 s); gradients as before (within 1.4e-5 of the exact
+//! adjoint's largest value of each kind).
 //!
 //! The recorded sums are the forward's (`C`, `W` within `2e-5` relative, see
 //! `spans/mod.rs`), so the chain rule's upstream factors carry the forward's error too; the

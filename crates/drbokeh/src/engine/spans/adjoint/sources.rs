@@ -30,6 +30,8 @@ use crate::model::{self, SCATTER_TAIL_PX};
 use crate::Real;
 use rayon::prelude::*;
 
+mod runs;
+
 /// Components of the receivers' upstream gradient: `dL/dC` (3) and `dL/dW`.
 const COMPONENTS: usize = 4;
 
@@ -95,10 +97,12 @@ struct PaddedRows<T> {
     g_weight: Vec<T>,
     focus_weight: Vec<T>,
     rel_disp: Vec<T>,
+    /// 1 for a tail receiver (see the module documentation), else 0.
+    tail: Vec<T>,
 }
 
 impl<T: Real> PaddedRows<T> {
-    fn new(rcv: &Receivers<T>) -> Self {
+    fn new(rcv: &Receivers<T>, tail: &[T]) -> Self {
         let (w, h) = (rcv.width, rcv.height);
         let stride = w + LANES;
         let pad = |v: &[T]| {
@@ -117,6 +121,7 @@ impl<T: Real> PaddedRows<T> {
             g_weight: pad(&rcv.g_weight),
             focus_weight: pad(&rcv.focus_weight),
             rel_disp: pad(&rcv.rel_disp),
+            tail: pad(tail),
         }
     }
 }
@@ -125,8 +130,8 @@ impl<T: Real> PaddedRows<T> {
 struct RowData<T> {
     /// The receivers' planes, padded for whole chunks.
     rows: PaddedRows<T>,
-    /// Prefix sums `[y][x][component]` (`w + 1` entries per row) of `gC` and `gW`.
-    prefix: Vec<f64>,
+    /// Prefix sums `[component][y][x]` (`w + 1` entries per row) of `gC` and `gW`.
+    prefix: [Vec<f64>; COMPONENTS],
     /// Receivers whose occlusion term is evaluated (`e(x) > 0` after the cutoff).
     focus: RowSet,
     /// Tail receivers (see the module documentation).
@@ -193,25 +198,25 @@ pub(super) fn pass_sources<T: Real>(
             || rcv.g_blue[i] != T::zero()
             || rcv.g_weight[i] != T::zero()
     };
-    let prefix: Vec<f64> = (0..h)
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            let mut row = vec![0.0f64; (w + 1) * COMPONENTS];
-            let mut run = [0.0f64; COMPONENTS];
-            for x in 0..w {
-                let i = y * w + x;
-                let g = [rcv.g_red[i], rcv.g_green[i], rcv.g_blue[i], rcv.g_weight[i]];
-                for c in 0..COMPONENTS {
-                    run[c] += g[c].f64();
-                    row[(x + 1) * COMPONENTS + c] = run[c];
+    let planes = [&rcv.g_red, &rcv.g_green, &rcv.g_blue, &rcv.g_weight];
+    let prefix = planes.map(|plane| {
+        (0..h)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                let mut row = vec![0.0f64; w + 1];
+                for x in 0..w {
+                    row[x + 1] = row[x] + plane[y * w + x].f64();
                 }
-            }
-            row
-        })
-        .collect();
+                row
+            })
+            .collect()
+    });
     let is_tail = |i: usize| tail[i] && is_nonzero(i);
+    let tail_plane: Vec<T> = (0..w * h)
+        .map(|i| if is_tail(i) { T::one() } else { T::zero() })
+        .collect();
     let data = RowData {
-        rows: PaddedRows::new(rcv),
+        rows: PaddedRows::new(rcv, &tail_plane),
         prefix,
         focus: RowSet::new(w, h, |i| rcv.focus_weight[i] > T::zero()),
         tail: RowSet::new(w, h, is_tail),
@@ -270,14 +275,28 @@ fn source_row<T: Real>(
 ) -> (Vec<[T; 5]>, f64) {
     let src = ctx.src;
     let (stride, pad) = (src.stride, src.pad);
-    let k = ctx.k;
     let big_r = table.big_r as f64;
     let mut out = vec![[T::zero(); 5]; stride];
     let mut k_row = 0.0f64;
-    for px in 0..stride {
-        let p = py * stride + px;
+    let mut px = 0;
+    while px < stride {
+        if runs::groupable(ctx, table, (px, py)) {
+            let outs = (&mut out[px..px + LANES], &mut k_row);
+            match src.step {
+                model::ScatterStep::Sharp => {
+                    runs::group::<T, true>(ctx, (shape, table), span_rows, data, (px, py), outs)
+                }
+                model::ScatterStep::Paper => {
+                    runs::group::<T, false>(ctx, (shape, table), span_rows, data, (px, py), outs)
+                }
+            }
+            px += LANES;
+            continue;
+        }
+        let (q, p) = (px, py * stride + px);
+        px += 1;
         let (a, r) = (src.alpha[p], src.radius[p]);
-        let (xs, ys) = (px as isize - pad as isize, py as isize - pad as isize);
+        let (xs, ys) = (q as isize - pad as isize, py as isize - pad as isize);
         let reach = (r.f64() + TAP_ROW_TAIL_PX).min(big_r).floor() as isize;
         if !data
             .nonzero
@@ -302,20 +321,30 @@ fn source_row<T: Real>(
             model::ScatterStep::Sharp => source_sums::<T, true>(ctx, st, span_rows, data, s),
             model::ScatterStep::Paper => source_sums::<T, false>(ctx, st, span_rows, data, s),
         };
-        let inv_area = src.inv_area[p];
-        let a_inv = a * inv_area;
-        let g_r = acc[4] * a_inv;
-        let d_y = s.terms.rel_disp;
-        out[px] = [
-            acc[0] * a_inv,
-            acc[1] * a_inv,
-            acc[2] * a_inv,
-            acc[3] * inv_area,
-            acc[5] * a_inv + g_r * k * model::scatter_radius_sign(d_y),
-        ];
-        k_row += (g_r * d_y.abs()).f64();
+        let (o, k_share) = source_out(ctx, p, &acc);
+        out[q] = o;
+        k_row += k_share;
     }
     (out, k_row)
+}
+
+/// The padded source `p`'s gradients `[g_lin r, g, b, g_alpha, g_disp]` and K's share
+/// from its sums.
+#[inline(always)]
+fn source_out<T: Real>(ctx: &Ctx<'_, T>, p: usize, acc: &Sums<T>) -> ([T; 5], f64) {
+    let src = ctx.src;
+    let inv_area = src.inv_area[p];
+    let a_inv = src.alpha[p] * inv_area;
+    let g_r = acc[4] * a_inv;
+    let d_y = src.rel_disp[p];
+    let out = [
+        acc[0] * a_inv,
+        acc[1] * a_inv,
+        acc[2] * a_inv,
+        acc[3] * inv_area,
+        acc[5] * a_inv + g_r * ctx.k * model::scatter_radius_sign(d_y),
+    ];
+    (out, (g_r * d_y.abs()).f64())
 }
 
 /// One tap of pass B: receiver `i` (image index) with scatter term `s`, its derivative
@@ -574,10 +603,10 @@ fn source_sums<T: Real, const SHARP: bool>(
         if let Some(run) = disc.interior {
             let (xa, xb) = clip(src.xs, w, run);
             if xa <= xb {
-                let row = &data.prefix[yr * (ctx.rcv.width + 1) * COMPONENTS..];
-                let (ia, ib) = (xa as usize * COMPONENTS, (xb as usize + 1) * COMPONENTS);
+                let row = yr * (ctx.rcv.width + 1);
+                let (ia, ib) = (row + xa as usize, row + xb as usize + 1);
                 for c in 0..COMPONENTS {
-                    interior[c] += row[ib + c] - row[ia + c];
+                    interior[c] += data.prefix[c][ib] - data.prefix[c][ia];
                 }
                 // Receivers whose occlusion term is evaluated: O - 1 and dO/dd_y on top.
                 for &x in data.focus.within(ctx.rcv.width, yr, (xa, xb)) {
