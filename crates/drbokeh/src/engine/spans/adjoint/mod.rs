@@ -32,8 +32,9 @@
 //!    the forward's in-focus interpolation (error `<= 1e-6` per tap in `O`) is not
 //!    differentiated, so the backward is the exact one's within `1e-6` there.
 //!
-//! **Recorded sums** (both steps). The span forward's sharp ring ends at `r + 2.75`
-//! (`S <= 6.8e-8` per tap), the paper ring at `r + 4.5`; the backward reaches `r + 6`.
+//! **Recorded sums** (both steps). The span render's sharp ring ends at `r + 2.3`
+//! ([`Rings::forward`](super::geometry::Rings::forward), `S <= 1.01e-6` per tap), the paper
+//! ring at `r + 4.5`; the backward reaches `r + 6`.
 //! The render cannot see the difference, but the chain rule can: the display transfer's
 //! derivative is evaluated at the composite of the recorded sums, and for a dark channel
 //! of a layer colour (`B ~ 1e-6`, the back layer's black stripes in the "blobs" scene of
