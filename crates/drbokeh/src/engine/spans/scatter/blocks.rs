@@ -7,7 +7,7 @@
 //! Per block and disc row, the interior is the smallest of its sources' interiors
 //! (`|dx| <= hi_min`, a span per source), and the ring runs from `hi_min + 1` to the
 //! largest outer end; a lane beyond its own source's outer end (`r + u_out`) is 0, so
-//! every source keeps exactly the taps of [`super::circle_row`]'s ring and tail cut, and
+//! every source keeps exactly the taps of [`super::circle::circle_row`]'s ring and tail cut, and
 //! the columns `hi_min < |dx| <= hi` of a source with a larger interior are evaluated
 //! exactly instead of taken as 1 (within the interior's bound, `1 - S <= 1e-5`, of the
 //! source-by-source sums). Each tap's step is [`ExpTable::steps`]'s value; the sums are
@@ -24,7 +24,7 @@ const SPREAD_SLACK: isize = 3;
 
 /// One source's disc row `ady`: `(hi, ho)`, its interior `|dx| <= hi` (`hi = -1`: none)
 /// and its ring's outer end `ho` (both clipped to the window half-width `hw`), or `None`
-/// without taps on this row ([`super::circle_row`]'s intervals).
+/// without taps on this row ([`super::circle::circle_row`]'s intervals).
 #[inline(always)]
 fn row_ends<T: Real>(
     src: &Source<T>,

@@ -5,7 +5,8 @@
 //! once for the disc rows `+-dy`. The same terms as source by source, summed in another
 //! fixed order.
 
-use super::{interior, Acc, BandLayer, Coefficients, Profile, Source, COMPONENTS};
+use super::circle::Profile;
+use super::{interior, Acc, BandLayer, Coefficients, Source, COMPONENTS};
 use crate::engine::spans::geometry::{LANES, MARGIN};
 use crate::Real;
 
@@ -19,7 +20,7 @@ pub(super) struct RunScratch<T> {
     padded: Vec<T>,
 }
 
-/// The shortest run of sources added as whole vectors ([`super::scatter_rows_circle`]).
+/// The shortest run of sources added as whole vectors ([`super::circle::scatter_rows_circle`]).
 pub(super) const RUN_MIN: usize = 4;
 
 /// The interior spans of a run of `v.len() / COMPONENTS` sources in adjacent columns
