@@ -13,8 +13,9 @@
 //! source-by-source sums). Each tap's step is [`ExpTable::steps`]'s value; the sums are
 //! the same terms in another fixed order.
 
+use super::circle::circle_half_widths;
 use super::{interior, Acc, BandLayer, Source, COMPONENTS};
-use crate::engine::spans::geometry::{floor_sqrt, ExpTable, LANES, MARGIN};
+use crate::engine::spans::geometry::{ExpTable, LANES, MARGIN};
 use crate::Real;
 
 /// A block's extra ring columns allowed beyond its widest source's own ring (a block ends
@@ -24,7 +25,8 @@ const SPREAD_SLACK: isize = 3;
 
 /// One source's disc row `ady`: `(hi, ho)`, its interior `|dx| <= hi` (`hi = -1`: none)
 /// and its ring's outer end `ho` (both clipped to the window half-width `hw`), or `None`
-/// without taps on this row ([`super::circle::circle_row`]'s intervals).
+/// without taps on this row or beyond the source's reach ([`circle_half_widths`], the
+/// intervals of [`super::circle::circle_row`]).
 #[inline(always)]
 fn row_ends<T: Real>(
     src: &Source<T>,
@@ -35,21 +37,10 @@ fn row_ends<T: Real>(
     if src.reach < ady {
         return None;
     }
-    let dy2 = (ady * ady) as f64;
-    let q_out = src.outer_sq - dy2;
-    if q_out < 0.0 {
-        return None;
+    match circle_half_widths(src, ady, hw, guess)? {
+        (Some(hi), ho) => Some((hi, ho)),
+        (None, ho) => Some((-1, ho)),
     }
-    guess.1 = floor_sqrt(q_out, guess.1);
-    let ho = guess.1.min(hw);
-    let q_in = src.inner_sq - dy2;
-    let hi = if src.inner_sq >= 0.0 && q_in >= 0.0 {
-        guess.0 = floor_sqrt(q_in, guess.0);
-        guess.0.min(hw)
-    } else {
-        -1
-    };
-    Some((hi, ho))
 }
 
 /// Adds the disc rows `+-ady` (`rows`: their sub-band rows) of every source of a source

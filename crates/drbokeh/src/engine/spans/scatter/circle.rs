@@ -269,7 +269,33 @@ pub(super) fn circle_row<T: Real>(
     hw: usize,
     guess: &mut (isize, isize),
 ) -> Option<DiscRow> {
-    let (hw, dy2) = (hw as isize, (ady * ady) as f64);
+    let (hi, ho) = circle_half_widths(src, ady, hw as isize, guess)?;
+    Some(match hi {
+        None => DiscRow {
+            interior: None,
+            left: Some((-ho, ho)),
+            right: None,
+        },
+        Some(hi) => DiscRow {
+            interior: Some((-hi, hi)),
+            left: (-ho < -hi).then_some((-ho, -hi - 1)),
+            right: (hi < ho).then_some((hi + 1, ho)),
+        },
+    })
+}
+
+/// The half-widths of a circle's disc row `ady`: `(hi, ho)`, the interior `|dx| <= hi`
+/// (`None`: no interior on this row) and the ring's outer end `ho`, both clipped to the
+/// window half-width `hw`, found from `guess` (the previous source's, updated); `None`
+/// without taps on this row. [`circle_row`] and the block path's rows share it.
+#[inline(always)]
+pub(super) fn circle_half_widths<T: Real>(
+    src: &Source<T>,
+    ady: isize,
+    hw: isize,
+    guess: &mut (isize, isize),
+) -> Option<(Option<isize>, isize)> {
+    let dy2 = (ady * ady) as f64;
     let q_out = src.outer_sq - dy2;
     if src.outer_sq < 0.0 || q_out < 0.0 {
         return None;
@@ -283,18 +309,7 @@ pub(super) fn circle_row<T: Real>(
     } else {
         None
     };
-    Some(match hi {
-        None => DiscRow {
-            interior: None,
-            left: Some((-ho, ho)),
-            right: None,
-        },
-        Some(hi) => DiscRow {
-            interior: Some((-hi, hi)),
-            left: (-ho < -hi).then_some((-ho, -hi - 1)),
-            right: (hi < ho).then_some((hi + 1, ho)),
-        },
-    })
+    Some((hi, ho))
 }
 
 /// The ring steps of a circle's disc row `ady` at columns `dx0 ..` (`dx0 >= 0`).
