@@ -17,6 +17,7 @@
 mod backward;
 mod fast;
 mod longest_first;
+pub mod paths;
 mod planes;
 mod reference;
 mod schedule;

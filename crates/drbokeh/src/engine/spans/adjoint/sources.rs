@@ -30,6 +30,7 @@ use crate::model::{self, SCATTER_TAIL_PX};
 use crate::Real;
 use rayon::prelude::*;
 
+mod conv;
 mod runs;
 
 /// Components of the receivers' upstream gradient: `dL/dC` (3) and `dL/dW`.
@@ -140,6 +141,10 @@ struct RowData<T> {
     nonzero: Area,
     /// Tail receivers, as an area count.
     tail_area: Area,
+    /// Whether runs of sources of one radius share their row geometry ([`runs`]).
+    groups: bool,
+    /// The receivers' planes for [`conv`] (a circle whose gauge table is symmetric).
+    wide: Option<conv::Wide<T>>,
 }
 
 /// A summed-area count (`(h + 1) x (w + 1)`) of a set of receivers.
@@ -215,9 +220,17 @@ pub(super) fn pass_sources<T: Real>(
     let tail_plane: Vec<T> = (0..w * h)
         .map(|i| if is_tail(i) { T::one() } else { T::zero() })
         .collect();
+    let shared = !crate::engine::paths::source_by_source();
+    let circle = matches!(shape, Shape::Circle);
+    let wide = (shared && circle && conv::symmetric(table)).then(|| {
+        let pad = src.pad + table.big_r + 2 * LANES;
+        conv::Wide::new(planes.map(|p| &p[..]), &tail_plane, (w, h), pad)
+    });
     let data = RowData {
+        wide,
         rows: PaddedRows::new(rcv, &tail_plane),
         prefix,
+        groups: shared,
         focus: RowSet::new(w, h, |i| rcv.focus_weight[i] > T::zero()),
         tail: RowSet::new(w, h, is_tail),
         nonzero: Area::new(w, h, is_nonzero),
@@ -279,8 +292,51 @@ fn source_row<T: Real>(
     let mut out = vec![[T::zero(); 5]; stride];
     let mut k_row = 0.0f64;
     let mut px = 0;
+    let mut scratch = conv::Scratch::default();
     while px < stride {
-        if runs::groupable(ctx, table, (px, py)) {
+        if let Some(wide) = &data.wide {
+            // A run of sources of one radius: correlations, a segment at a time.
+            let p = py * stride + px;
+            let mut n = 1;
+            while px + n < stride && src.radius[p + n] == src.radius[p] {
+                n += 1;
+            }
+            if n >= conv::RUN_MIN {
+                let st = (shape, table);
+                let mut q = px;
+                while q < px + n {
+                    let m = (px + n - q).min(conv::SEGMENT);
+                    let at = (q, m, py);
+                    let outs = (&mut out[q..q + m], &mut k_row);
+                    match src.step {
+                        model::ScatterStep::Sharp => conv::segment::<T, true>(
+                            ctx,
+                            st,
+                            span_rows,
+                            data,
+                            wide,
+                            at,
+                            outs,
+                            &mut scratch,
+                        ),
+                        model::ScatterStep::Paper => conv::segment::<T, false>(
+                            ctx,
+                            st,
+                            span_rows,
+                            data,
+                            wide,
+                            at,
+                            outs,
+                            &mut scratch,
+                        ),
+                    }
+                    q += m;
+                }
+                px += n;
+                continue;
+            }
+        }
+        if data.groups && runs::groupable(ctx, table, (px, py)) {
             let outs = (&mut out[px..px + LANES], &mut k_row);
             match src.step {
                 model::ScatterStep::Sharp => {
