@@ -57,7 +57,7 @@
 //! profile), `perf record`): of the whole run (render, forward with tape, backward),
 //! 52 % is the two fast forwards (the tape's adds the 1.5 px ring), 31 % pass B, 6 % the
 //! full-window refinement of small-`W` receivers (the front layer's empty surround within
-//! `R` of its disc; scalar), and the rest (compositing backward, pass A, box coverage by
+//! `R` of its disc), and the rest (compositing backward, pass A, box coverage by
 //! summed-area tables, folds) a few percent. Pass B is the backward: about 600 taps per
 //! padded source for both layers (zero-alpha sources included, for their alpha gradient),
 //! each one `exp` (two where a receiver is in focus) and about 20 flops. Measured in the
