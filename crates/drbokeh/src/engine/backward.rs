@@ -123,22 +123,38 @@ fn receiver_gradients<T: Real>(
     grad_output: &Image<T>,
     tone: &model::Tone,
 ) -> Vec<ReceiverGrads<T>> {
-    let per_pixel: Vec<Vec<model::LayerSumGradients<T>>> = (0..linear.len())
-        .into_par_iter()
-        .map(|i| {
-            let saved: Vec<LayerAtPixel<T>> = (0..n_layers).map(|l| saved(i, l)).collect();
-            let mut g_lin = [T::zero(); 3];
-            for c in 0..3 {
-                g_lin[c] = grad_output.data[3 * i + c] * tone.encode_derivative(linear[i][c]);
+    // Per pixel, every layer's gradients (pixel-major), a row of pixels per task with
+    // its working memory reused.
+    let n = linear.len();
+    let row = 256;
+    let mut per_pixel = vec![model::LayerSumGradients::<T>::default(); n * n_layers];
+    per_pixel
+        .par_chunks_mut(row * n_layers)
+        .enumerate()
+        .for_each(|(k, out)| {
+            let mut layers = Vec::with_capacity(n_layers);
+            let mut behind = Vec::with_capacity(n_layers + 1);
+            for (j, out) in out.chunks_mut(n_layers).enumerate() {
+                let i = k * row + j;
+                layers.clear();
+                for l in 0..n_layers {
+                    layers.push(saved(i, l));
+                }
+                let mut g_lin = [T::zero(); 3];
+                for c in 0..3 {
+                    g_lin[c] = grad_output.data[3 * i + c] * tone.encode_derivative(linear[i][c]);
+                }
+                model::composite_backward_into(&layers, g_lin, &mut behind, out);
             }
-            model::composite_backward(&saved, g_lin)
-        })
-        .collect();
+        });
     (0..n_layers)
-        .map(|l| ReceiverGrads {
-            d_colour_sum: per_pixel.iter().map(|p| p[l].colour_sum).collect(),
-            d_weight_sum: per_pixel.iter().map(|p| p[l].weight_sum).collect(),
-            d_coverage: per_pixel.iter().map(|p| p[l].coverage).collect(),
+        .map(|l| {
+            let layer = || per_pixel.iter().skip(l).step_by(n_layers);
+            ReceiverGrads {
+                d_colour_sum: layer().map(|p| p.colour_sum).collect(),
+                d_weight_sum: layer().map(|p| p.weight_sum).collect(),
+                d_coverage: layer().map(|p| p.coverage).collect(),
+            }
         })
         .collect()
 }

@@ -87,10 +87,25 @@ pub fn composite_backward<T: Real>(
     layers: &[LayerAtPixel<T>],
     g_linear: [T; 3],
 ) -> Vec<LayerSumGradients<T>> {
+    let mut out = vec![LayerSumGradients::default(); layers.len()];
+    composite_backward_into(layers, g_linear, &mut Vec::new(), &mut out);
+    out
+}
+
+/// [`composite_backward`] into `out` (one entry per layer), with `behind` as working
+/// memory (no allocation once it holds `layers.len() + 1` entries).
+/// Equation M17 of docs/model.md.
+pub fn composite_backward_into<T: Real>(
+    layers: &[LayerAtPixel<T>],
+    g_linear: [T; 3],
+    behind: &mut Vec<[T; 3]>,
+    out: &mut [LayerSumGradients<T>],
+) {
     let n_layers = layers.len();
     let eps = T::c(WEIGHT_EPSILON);
     // U_l from the back.
-    let mut behind = vec![[T::zero(); 3]; n_layers + 1];
+    behind.clear();
+    behind.resize(n_layers + 1, [T::zero(); 3]);
     for l in (0..n_layers).rev() {
         let s = &layers[l];
         for c in 0..3 {
@@ -98,23 +113,20 @@ pub fn composite_backward<T: Real>(
         }
     }
     let mut g_u = g_linear;
-    (0..n_layers)
-        .map(|l| {
-            let s = &layers[l];
-            let mut g_b = [T::zero(); 3];
-            let mut g_o = T::zero();
-            for c in 0..3 {
-                g_b[c] = g_u[c] * s.coverage;
-                g_o = g_o + g_u[c] * (s.colour[c] - behind[l + 1][c]);
-                g_u[c] = g_u[c] * (T::one() - s.coverage);
-            }
-            let inv = T::one() / (s.weight + eps);
-            LayerSumGradients {
-                colour_sum: g_b.map(|v| v * inv),
-                weight_sum: -(g_b[0] * s.colour[0] + g_b[1] * s.colour[1] + g_b[2] * s.colour[2])
-                    * inv,
-                coverage: g_o,
-            }
-        })
-        .collect()
+    for l in 0..n_layers {
+        let s = &layers[l];
+        let mut g_b = [T::zero(); 3];
+        let mut g_o = T::zero();
+        for c in 0..3 {
+            g_b[c] = g_u[c] * s.coverage;
+            g_o = g_o + g_u[c] * (s.colour[c] - behind[l + 1][c]);
+            g_u[c] = g_u[c] * (T::one() - s.coverage);
+        }
+        let inv = T::one() / (s.weight + eps);
+        out[l] = LayerSumGradients {
+            colour_sum: g_b.map(|v| v * inv),
+            weight_sum: -(g_b[0] * s.colour[0] + g_b[1] * s.colour[1] + g_b[2] * s.colour[2]) * inv,
+            coverage: g_o,
+        };
+    }
 }

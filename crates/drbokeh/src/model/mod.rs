@@ -29,7 +29,8 @@ mod tap;
 mod tone;
 
 pub use composite::{
-    composite, composite_backward, Accumulator, LayerAtPixel, LayerSumGradients, WEIGHT_EPSILON,
+    composite, composite_backward, composite_backward_into, Accumulator, LayerAtPixel,
+    LayerSumGradients, WEIGHT_EPSILON,
 };
 pub use coverage::{
     box_coverage, coverage_half_size_px, coverage_radius_px, DiscCoverage, MIN_COVERAGE_RADIUS_PX,

@@ -8,6 +8,7 @@ use super::tone::{source_linear_with_derivatives, Tone};
 use crate::camera::Camera;
 use crate::stack::Layer;
 use crate::Real;
+use rayon::prelude::*;
 
 /// The camera and model options in float type `T`, for evaluating per-pixel terms.
 /// Equations M1, M2, M10, M18-M20 of docs/model.md.
@@ -104,25 +105,33 @@ pub fn prepare_layer<T: Real>(
     options: &ModelOptions,
 ) -> PreparedLayer<T> {
     let pixel = PixelModel::<T>::new(camera, options);
+    // Per pixel and independent: in parallel, each value as computed alone.
     let rel_disp: Vec<T> = layer
         .disparity
         .data
-        .iter()
+        .par_iter()
         .map(|&v| pixel.rel_disp(v))
         .collect();
-    let mut rgb_linear = Vec::with_capacity(layer.rgb_encoded.data.len());
-    for (px, &d) in layer.rgb_encoded.data.chunks_exact(3).zip(&rel_disp) {
-        for &encoded in px {
-            rgb_linear.push(pixel.linear(encoded, d));
-        }
-    }
+    let mut rgb_linear = vec![T::zero(); layer.rgb_encoded.data.len()];
+    rgb_linear
+        .par_chunks_mut(3)
+        .zip(layer.rgb_encoded.data.par_chunks_exact(3))
+        .zip(rel_disp.par_iter())
+        .for_each(|((out, px), &d)| {
+            for (o, &encoded) in out.iter_mut().zip(px) {
+                *o = pixel.linear(encoded, d);
+            }
+        });
     PreparedLayer {
         width: layer.alpha.width,
         height: layer.alpha.height,
         rgb_linear,
         alpha: layer.alpha.data.clone(),
-        radius_px: rel_disp.iter().map(|&d| pixel.radius_px(d)).collect(),
-        focus_weight: rel_disp.iter().map(|&d| pixel.focus_weight(d)).collect(),
+        radius_px: rel_disp.par_iter().map(|&d| pixel.radius_px(d)).collect(),
+        focus_weight: rel_disp
+            .par_iter()
+            .map(|&d| pixel.focus_weight(d))
+            .collect(),
         rel_disp,
     }
 }

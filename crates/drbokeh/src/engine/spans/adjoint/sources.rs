@@ -143,8 +143,8 @@ struct RowData<T> {
     tail_area: Area,
     /// Whether runs of sources of one radius share their row geometry ([`runs`]).
     groups: bool,
-    /// The receivers' planes for [`conv`] (a circle whose gauge table is symmetric).
-    wide: Option<conv::Wide<T>>,
+    /// Whether runs take [`conv`]'s correlations (a circle whose gauge table is symmetric).
+    conv: bool,
 }
 
 /// A summed-area count (`(h + 1) x (w + 1)`) of a set of receivers.
@@ -222,12 +222,9 @@ pub(super) fn pass_sources<T: Real>(
         .collect();
     let shared = !crate::engine::paths::source_by_source();
     let circle = matches!(shape, Shape::Circle);
-    let wide = (shared && circle && conv::symmetric(table)).then(|| {
-        let pad = src.pad + table.big_r + 2 * LANES;
-        conv::Wide::new(planes.map(|p| &p[..]), &tail_plane, (w, h), pad)
-    });
+    let conv = shared && circle && conv::symmetric(table);
     let data = RowData {
-        wide,
+        conv,
         rows: PaddedRows::new(rcv, &tail_plane),
         prefix,
         groups: shared,
@@ -294,7 +291,7 @@ fn source_row<T: Real>(
     let mut px = 0;
     let mut scratch = conv::Scratch::default();
     while px < stride {
-        if let Some(wide) = &data.wide {
+        if data.conv {
             // A run of sources of one radius: correlations, a segment at a time.
             let p = py * stride + px;
             let mut n = 1;
@@ -314,7 +311,6 @@ fn source_row<T: Real>(
                             st,
                             span_rows,
                             data,
-                            wide,
                             at,
                             outs,
                             &mut scratch,
@@ -324,7 +320,6 @@ fn source_row<T: Real>(
                             st,
                             span_rows,
                             data,
-                            wide,
                             at,
                             outs,
                             &mut scratch,

@@ -17,8 +17,8 @@
 //! interior from prefix sums (`S = 1`, `S' = 0`), the forward's ring (`Rings::of`) from
 //! the receivers' planes and the tail receivers beyond it out to `r + 6` from the same
 //! planes times their tail membership (1 or 0); on a tap row every tap out to `r + 6`.
-//! Receivers outside the image are zero columns of [`Wide`], which clips as the source by
-//! source code does. Receivers whose occlusion term is evaluated (`e(x) > 0`) get the
+//! Receivers outside the image are zero columns of the correlated rows ([`fill_rows`]),
+//! which clips as the source by source code does. Receivers whose occlusion term is evaluated (`e(x) > 0`) get the
 //! exact `O` as a correction `O - 1` on top, one by one (their `S`, `S'` from the same
 //! profile), as the interior's do. The same terms as source by source, in another fixed
 //! order: identical for any thread count.
@@ -37,46 +37,6 @@ pub(super) const SEGMENT: usize = 64;
 
 /// The shortest run taken as a correlation (shorter ones go source by source).
 pub(super) const RUN_MIN: usize = 8;
-
-/// The receivers' upstream gradients `gC` (3) and `gW`, each image row between zero
-/// columns (enough for any padded source's reach), and the same times the receivers'
-/// tail membership.
-pub(super) struct Wide<T> {
-    /// Zero columns left of column 0.
-    pad: usize,
-    stride: usize,
-    all: [Vec<T>; COMPONENTS],
-    tail: [Vec<T>; COMPONENTS],
-}
-
-impl<T: Real> Wide<T> {
-    /// The planes of `planes` (image-sized) and `tail` (1 or 0 per receiver), with `pad`
-    /// zero columns on each side of every row.
-    pub(super) fn new(
-        planes: [&[T]; COMPONENTS],
-        tail: &[T],
-        (w, h): (usize, usize),
-        pad: usize,
-    ) -> Self {
-        let stride = w + 2 * pad;
-        let wide = |v: &[T], masked: bool| {
-            let mut out = vec![T::zero(); h * stride];
-            for y in 0..h {
-                for x in 0..w {
-                    let m = if masked { tail[y * w + x] } else { T::one() };
-                    out[y * stride + pad + x] = v[y * w + x] * m;
-                }
-            }
-            out
-        };
-        Wide {
-            pad,
-            stride,
-            all: planes.map(|p| wide(p, false)),
-            tail: planes.map(|p| wide(p, true)),
-        }
-    }
-}
 
 /// Whether `table` (a circle's gauges, window mask folded in) is symmetric in `dx` and in
 /// `dy`, as the correlation assumes.
@@ -222,7 +182,6 @@ pub(super) fn segment<T: Real, const SHARP: bool>(
     (shape, table): (&Shape, &GaugeTable<T>),
     span_rows: &[bool],
     data: &RowData<T>,
-    wide: &Wide<T>,
     (q0, m, py): (usize, usize, usize),
     (out, k_row): (&mut [[T; 5]], &mut f64),
     scratch: &mut Scratch<T>,
@@ -308,7 +267,10 @@ pub(super) fn segment<T: Real, const SHARP: bool>(
             // The ring (every tap on a tap row) over every receiver.
             let len = m.div_ceil(LANES) * LANES + 2 * f + LANES;
             let x0 = xs0 - f as isize;
-            fill_rows(&mut scratch.g, len, &wide.all, wide, rows_of_kind, x0);
+            let rcv = ctx.rcv;
+            let planes = [&rcv.g_red[..], &rcv.g_green, &rcv.g_blue, &rcv.g_weight];
+            let rows = (rows_of_kind, w);
+            fill_rows::<T, false>(&mut scratch.g, len, planes, &data.rows, rows, x0);
             correlate(&prof.ring, prof.centre, (&scratch.g, len, f), m, &mut corr);
             // Beyond the ring, the tail receivers only.
             if tails && (!prof.tail.is_empty() || prof.tail_centre.is_some()) {
@@ -317,7 +279,7 @@ pub(super) fn segment<T: Real, const SHARP: bool>(
                     any_tail |= data.tail_area.any(cols, (yr as isize, yr as isize));
                 }
                 if any_tail {
-                    fill_rows(&mut scratch.g, len, &wide.tail, wide, rows_of_kind, x0);
+                    fill_rows::<T, true>(&mut scratch.g, len, planes, &data.rows, rows, x0);
                     let g = (&scratch.g[..], len, f);
                     correlate(&prof.tail, prof.tail_centre, g, m, &mut corr);
                 }
@@ -428,33 +390,53 @@ fn interior_sums(
     }
 }
 
-/// `g[c][j]` for `j < len`: the sum over `rows` of `planes[c]` at image column `x0 + j`.
+/// `g[c][j]` for `j < len`: the sum over `rows` (image rows of `w` columns) of
+/// `planes[c]` (image-sized) at image column `x0 + j`, zero outside the image; `TAIL`:
+/// each value times the receiver's tail membership (`padded.tail`, 1 or 0).
 #[inline(always)]
-fn fill_rows<T: Real>(
+fn fill_rows<T: Real, const TAIL: bool>(
     g: &mut Vec<T>,
     len: usize,
-    planes: &[Vec<T>; COMPONENTS],
-    wide: &Wide<T>,
-    rows: [Option<usize>; 2],
+    planes: [&[T]; COMPONENTS],
+    padded: &super::PaddedRows<T>,
+    (rows, w): ([Option<usize>; 2], usize),
     x0: isize,
 ) {
     if g.len() < COMPONENTS * len {
         g.resize(COMPONENTS * len, T::zero());
     }
-    let at = |yr: usize| (yr * wide.stride) as isize + wide.pad as isize + x0;
+    // Image columns x0 + ja .. x0 + jb.
+    let ja = (-x0).clamp(0, len as isize) as usize;
+    let jb = (w as isize - x0).clamp(ja as isize, len as isize) as usize;
+    let xa = (x0 + ja as isize).clamp(0, w as isize) as usize;
+    let n = jb - ja;
+    let row = |y: usize| {
+        let m = &padded.tail[y * padded.stride + xa..y * padded.stride + xa + n];
+        (y * w + xa, m)
+    };
     for c in 0..COMPONENTS {
         let out = &mut g[c * len..(c + 1) * len];
+        out[..ja].fill(T::zero());
+        out[jb..].fill(T::zero());
+        let out = &mut out[ja..jb];
         match rows {
             [Some(a), Some(b)] => {
-                let (a, b) = (at(a) as usize, at(b) as usize);
-                let (pa, pb) = (&planes[c][a..a + len], &planes[c][b..b + len]);
-                for j in 0..len {
-                    out[j] = pa[j] + pb[j];
+                let ((ia, ma), (ib, mb)) = (row(a), row(b));
+                let (pa, pb) = (&planes[c][ia..ia + n], &planes[c][ib..ib + n]);
+                for j in 0..n {
+                    out[j] = if TAIL {
+                        pa[j] * ma[j] + pb[j] * mb[j]
+                    } else {
+                        pa[j] + pb[j]
+                    };
                 }
             }
             [Some(a), None] | [None, Some(a)] => {
-                let a = at(a) as usize;
-                out.copy_from_slice(&planes[c][a..a + len]);
+                let (ia, ma) = row(a);
+                let pa = &planes[c][ia..ia + n];
+                for j in 0..n {
+                    out[j] = if TAIL { pa[j] * ma[j] } else { pa[j] };
+                }
             }
             [None, None] => out.fill(T::zero()),
         }
@@ -478,35 +460,36 @@ fn correlate<T: Real>(
     let planes: [&[T]; COMPONENTS] = std::array::from_fn(|c| &g[c * len..(c + 1) * len]);
     let mut q = 0;
     while q < m {
-        let mut s = [[T::zero(); LANES]; 2 * COMPONENTS];
+        // Per component, the sums with S and with S'.
+        let mut s_s = [[T::zero(); LANES]; COMPONENTS];
+        let mut s_d = [[T::zero(); LANES]; COMPONENTS];
         if let Some((sv, dv)) = centre {
             for c in 0..COMPONENTS {
                 let v: &[T; LANES] = planes[c][f + q..f + q + LANES].try_into().expect("LANES");
                 for l in 0..LANES {
-                    s[c][l] = sv * v[l];
-                    s[COMPONENTS + c][l] = dv * v[l];
+                    s_s[c][l] = sv * v[l];
+                    s_d[c][l] = dv * v[l];
                 }
             }
         }
-        for &(dx, sv, dv) in taps {
-            for c in 0..COMPONENTS {
-                let a: &[T; LANES] = planes[c][f + q - dx..f + q - dx + LANES]
-                    .try_into()
-                    .expect("LANES");
-                let b: &[T; LANES] = planes[c][f + q + dx..f + q + dx + LANES]
-                    .try_into()
-                    .expect("LANES");
+        for c in 0..COMPONENTS {
+            let plane = &planes[c][q..q + 2 * f + LANES];
+            let (ss, sd) = (&mut s_s[c], &mut s_d[c]);
+            for &(dx, sv, dv) in taps {
+                let a: &[T; LANES] = plane[f - dx..f - dx + LANES].try_into().expect("LANES");
+                let b: &[T; LANES] = plane[f + dx..f + dx + LANES].try_into().expect("LANES");
                 for l in 0..LANES {
                     let t = a[l] + b[l];
-                    s[c][l] = s[c][l] + sv * t;
-                    s[COMPONENTS + c][l] = s[COMPONENTS + c][l] + dv * t;
+                    ss[l] = ss[l] + sv * t;
+                    sd[l] = sd[l] + dv * t;
                 }
             }
         }
         let n = (m - q).min(LANES);
-        for c in 0..2 * COMPONENTS {
+        for c in 0..COMPONENTS {
             for l in 0..n {
-                corr[c][q + l] += s[c][l].f64();
+                corr[c][q + l] += s_s[c][l].f64();
+                corr[COMPONENTS + c][q + l] += s_d[c][l].f64();
             }
         }
         q += LANES;
