@@ -74,7 +74,12 @@
 //! radius in adjacent columns now share their row geometry and each ring step
 //! (`sources/runs.rs`; [`disc`]'s groups): 512 px K 30 physical, user CPU 2.7-3.5 ->
 //! 1.5-2.1 s (load 4-4.5, alternating runs; paper 1.85-1.9 -> 1.5-1.6 s); gradients as before (within 1.4e-5 of the exact
-//! adjoint's largest value of each kind).
+//! adjoint's largest value of each kind). Then a circle's runs as row correlations
+//! (`sources/conv.rs`), the refinement of small weights in 8-lane runs of alpha > 0, and
+//! the composite's backward without per-pixel allocations: `drbokeh bench --quick --only
+//! adjoint` span backward 0.71-0.87 -> 0.22-0.27 s against a 0.07 s forward (3.1-3.7x),
+//! vjp 512 px K 30 physical 1.07-1.34 -> 0.94-0.97 s wall (quiet machine, alternating
+//! runs; `docs/performance.md`).
 //!
 //! The recorded sums are the forward's (`C`, `W` within `2e-5` relative, see
 //! `spans/mod.rs`), so the chain rule's upstream factors carry the forward's error too; the

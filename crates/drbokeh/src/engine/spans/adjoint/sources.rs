@@ -14,6 +14,12 @@
 //! a layer's edge, preset physical); elsewhere `dL/dW <= |dL/dB| o / 1e-2` and the dropped
 //! tail is at most `1e-5` of a unit tap's gradient per source row.
 //!
+//! **Runs.** Sources of one radius in adjacent columns share their work: for a circle,
+//! a run is a row correlation of the receivers' gradients with the disc row's profile
+//! ([`conv`]); for a polygon, groups of [`LANES`] share the row geometry and each ring
+//! step ([`runs`]). `engine::paths::force_source_by_source` turns both off (the plain
+//! path, for `tests/spans_adjoint_runs.rs`).
+//!
 //! **Skipped sources.** A source none of whose reachable receivers (the bounding box of
 //! `r + 6`) has a non-zero `dL/dC` or `dL/dW` has all sums exactly zero (a summed-area
 //! count decides it in O(1)); zero-alpha sources need only `sum gc S O` (their alpha
