@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{random_stack, settings, tape_bits, Rng};
+use common::{random_stack, settings, tape_bits, tape_gradients, Rng};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
@@ -50,30 +50,6 @@ fn weights(seed: u64, w: usize, h: usize) -> Image<f64> {
     Image::from_vec(w, h, 3, data).unwrap()
 }
 
-fn gradients<T: Real>(
-    stack: &LayerStack<T>,
-    s: &RenderSettings,
-    g: &Image<T>,
-    engine: Engine,
-) -> Gradients<f64> {
-    let (_, tape) = render_with_tape_on(stack, s, engine, &NoProgress).unwrap();
-    assert_eq!(tape.engine(), engine);
-    let r = tape.backward(g, &NoProgress).unwrap();
-    Gradients {
-        layers: r
-            .layers
-            .iter()
-            .map(|l| drbokeh::LayerGradients {
-                rgb: l.rgb.cast(),
-                alpha: l.alpha.cast(),
-                disparity: l.disparity.cast(),
-            })
-            .collect(),
-        blur_k: r.blur_k,
-        focus: r.focus,
-    }
-}
-
 /// Every gradient of `grads` as `(name, values)`, scalars last.
 fn kinds(g: &Gradients<f64>) -> Vec<(String, Vec<f64>)> {
     let mut out = Vec::new();
@@ -100,11 +76,11 @@ fn max_diff(a: &[f64], b: &[f64]) -> f64 {
 /// itself shows in f32 (both measured against the exact f64 adjoint).
 fn check(name: &str, stack: &LayerStack<f64>, s: &RenderSettings, seed: u64) {
     let g = weights(seed, stack.width, stack.height);
-    let exact = kinds(&gradients(stack, s, &g, Engine::Threaded));
-    let fast = kinds(&gradients(stack, s, &g, Engine::Fast));
+    let exact = kinds(&tape_gradients(stack, s, &g, Engine::Threaded));
+    let fast = kinds(&tape_gradients(stack, s, &g, Engine::Fast));
     let (stack32, g32) = (stack.cast::<f32>(), g.cast::<f32>());
-    let exact32 = kinds(&gradients(&stack32, s, &g32, Engine::Threaded));
-    let fast32 = kinds(&gradients(&stack32, s, &g32, Engine::Fast));
+    let exact32 = kinds(&tape_gradients(&stack32, s, &g32, Engine::Threaded));
+    let fast32 = kinds(&tape_gradients(&stack32, s, &g32, Engine::Fast));
     let mut failures = Vec::new();
     for i in 0..exact.len() {
         let (kind, reference) = (&exact[i].0, &exact[i].1);

@@ -8,11 +8,11 @@
 
 mod common;
 
-use common::{random_stack, settings, tape_bits};
+use common::{mixed_stack, random_stack, settings, tape_bits, tape_gradients};
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
     render, render_with_stats, render_with_tape_on, Aperture, Engine, Gradients, Image, Layer,
-    LayerStack, NoProgress, Real, RenderSettings,
+    LayerStack, NoProgress, RenderSettings,
 };
 
 /// Largest allowed `|spans - exact|`, relative to the largest exact gradient of the same
@@ -40,30 +40,6 @@ fn weights(seed: u64, w: usize, h: usize) -> Image<f64> {
     let mut rng = common::Rng(seed);
     let data = (0..w * h * 3).map(|_| rng.range(-1.0, 1.0)).collect();
     Image::from_vec(w, h, 3, data).unwrap()
-}
-
-fn gradients<T: Real>(
-    stack: &LayerStack<T>,
-    s: &RenderSettings,
-    g: &Image<T>,
-    engine: Engine,
-) -> Gradients<f64> {
-    let (_, tape) = render_with_tape_on(stack, s, engine, &NoProgress).unwrap();
-    assert_eq!(tape.engine(), engine);
-    let r = tape.backward(g, &NoProgress).unwrap();
-    Gradients {
-        layers: r
-            .layers
-            .iter()
-            .map(|l| drbokeh::LayerGradients {
-                rgb: l.rgb.cast(),
-                alpha: l.alpha.cast(),
-                disparity: l.disparity.cast(),
-            })
-            .collect(),
-        blur_k: r.blur_k,
-        focus: r.focus,
-    }
 }
 
 fn kinds(g: &Gradients<f64>) -> Vec<(String, Vec<f64>)> {
@@ -95,11 +71,11 @@ fn check(
     engine: Engine,
 ) -> f64 {
     let g = weights(seed, stack.width, stack.height);
-    let exact = kinds(&gradients(stack, s, &g, Engine::Threaded));
-    let spans = kinds(&gradients(stack, s, &g, engine));
+    let exact = kinds(&tape_gradients(stack, s, &g, Engine::Threaded));
+    let spans = kinds(&tape_gradients(stack, s, &g, engine));
     let (stack32, g32) = (stack.cast::<f32>(), g.cast::<f32>());
-    let exact32 = kinds(&gradients(&stack32, s, &g32, Engine::Threaded));
-    let spans32 = kinds(&gradients(&stack32, s, &g32, engine));
+    let exact32 = kinds(&tape_gradients(&stack32, s, &g32, Engine::Threaded));
+    let spans32 = kinds(&tape_gradients(&stack32, s, &g32, engine));
     let mut failures = Vec::new();
     let mut worst = 0.0f64;
     for i in 0..exact.len() {
@@ -223,34 +199,10 @@ fn span_adjoint_matches_exact_at_large_radius() {
     }
 }
 
-/// Two layers over three bands of 128 rows: a blurred front layer with partial alpha, and
-/// a back layer out of focus in its top band and in focus below with disparities spread
-/// over 0.7 (at K 5 that needs more interpolation points than the spans take), so that
-/// `auto` renders its band-layers as spans and as taps.
-fn mixed(w: usize, h: usize) -> LayerStack<f64> {
-    let mut front = Layer::<f64>::constant(w, h, [0.9, 0.4, 0.1], 0.0, 0.95);
-    let mut back = Layer::<f64>::constant(w, h, [0.0; 3], 1.0, 0.5);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            front.alpha.data[i] = (((x / 6 + y / 9) % 4) as f64 / 3.0).min(1.0);
-            for c in 0..3 {
-                back.rgb_encoded.data[3 * i + c] = ((x / 5 + y / 7 + c) % 3) as f64 / 2.0;
-            }
-            back.disparity.data[i] = if y < 128 {
-                0.95
-            } else {
-                0.15 + 0.7 * x as f64 / w as f64
-            };
-        }
-    }
-    LayerStack::new(vec![front, back]).unwrap()
-}
-
 /// `auto` mixes span and tap band-layers: each row's backward follows its forward.
 #[test]
 fn auto_adjoint_matches_exact_with_mixed_paths() {
-    let stack = mixed(40, 300);
+    let stack: LayerStack<f64> = mixed_stack(40, 300);
     for s in presets(settings(0.5, 5.0, 41, Aperture::Circle)) {
         let (_, stats) =
             render_with_stats(&stack.cast::<f32>(), &s, Engine::Auto, &NoProgress).unwrap();

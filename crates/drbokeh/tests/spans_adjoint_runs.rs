@@ -11,12 +11,12 @@
 
 mod common;
 
-use common::settings;
+use common::{mixed_stack, settings, tape_gradients};
 use drbokeh::engine::paths;
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
-    render_with_stats, render_with_tape_on, Aperture, Engine, Gradients, Image, Layer, LayerStack,
-    NoProgress, Real, RenderSettings,
+    render_with_stats, Aperture, Engine, Gradients, Image, Layer, LayerStack, NoProgress, Real,
+    RenderSettings,
 };
 
 /// Largest allowed difference, relative to the largest gradient of the same layer and
@@ -55,28 +55,6 @@ fn rows_scene<T: Real>(w: usize, h: usize) -> LayerStack<T> {
 
 /// Every gradient kind as `(name, values, floor)`: the floor of its scale is
 /// [`SCALE_FLOOR`] of the layer's largest gradient of any kind (0 for K and focus).
-/// `tests/spans_adjoint.rs`'s mixed scene: at K 5, `auto` renders the rows of the
-/// background's constant band (disparity 0.95) with taps and the rest with spans.
-fn mixed<T: Real>(w: usize, h: usize) -> LayerStack<T> {
-    let mut front = Layer::<f64>::constant(w, h, [0.9, 0.4, 0.1], 0.0, 0.95);
-    let mut back = Layer::<f64>::constant(w, h, [0.0; 3], 1.0, 0.5);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            front.alpha.data[i] = (((x / 6 + y / 9) % 4) as f64 / 3.0).min(1.0);
-            for c in 0..3 {
-                back.rgb_encoded.data[3 * i + c] = ((x / 5 + y / 7 + c) % 3) as f64 / 2.0;
-            }
-            back.disparity.data[i] = if y < 128 {
-                0.95
-            } else {
-                0.15 + 0.7 * x as f64 / w as f64
-            };
-        }
-    }
-    LayerStack::new(vec![front, back]).unwrap().cast()
-}
-
 fn all_values(g: &Gradients<f64>) -> Vec<(String, Vec<f64>, f64)> {
     let mut out = Vec::new();
     for (l, lg) in g.layers.iter().enumerate() {
@@ -107,22 +85,7 @@ fn gradients<T: Real>(stack: &LayerStack<T>, s: &RenderSettings, engine: Engine)
     let g: Vec<T> = (0..w * h * 3)
         .map(|i| T::c(((i * 7919) % 13) as f64 / 6.0 - 1.0))
         .collect();
-    let g = Image::from_vec(w, h, 3, g).unwrap();
-    let (_, tape) = render_with_tape_on(stack, s, engine, &NoProgress).unwrap();
-    let r = tape.backward(&g, &NoProgress).unwrap();
-    Gradients {
-        layers: r
-            .layers
-            .iter()
-            .map(|l| drbokeh::LayerGradients {
-                rgb: l.rgb.cast(),
-                alpha: l.alpha.cast(),
-                disparity: l.disparity.cast(),
-            })
-            .collect(),
-        blur_k: r.blur_k,
-        focus: r.focus,
-    }
+    tape_gradients(stack, s, &Image::from_vec(w, h, 3, g).unwrap(), engine)
 }
 
 /// The worst relative difference of the shared runs' gradients from the plain path's.
@@ -186,14 +149,14 @@ fn shared_runs_match_source_by_source() {
         settings(0.5, 5.0, 41, Aperture::Circle).with_model(ModelOptions::PHYSICAL),
     ] {
         let (_, stats) =
-            render_with_stats(&mixed::<f32>(40, 300), &s, Engine::Auto, &NoProgress).unwrap();
+            render_with_stats(&mixed_stack::<f32>(40, 300), &s, Engine::Auto, &NoProgress).unwrap();
         assert!(
             stats.span_layers > 0 && stats.tap_layers > 0,
             "the scene mixes spans and taps: {stats:?}"
         );
         let name = format!("mixed {:?} Auto", s.preset);
-        let w64 = worst(&mixed::<f64>(40, 300), &s, Engine::Auto, &name);
-        let w32 = worst(&mixed::<f32>(40, 300), &s, Engine::Auto, &name);
+        let w64 = worst(&mixed_stack::<f64>(40, 300), &s, Engine::Auto, &name);
+        let w32 = worst(&mixed_stack::<f32>(40, 300), &s, Engine::Auto, &name);
         eprintln!("{name}: f64 {w64:.2e}, f32 {w32:.2e}");
         if !(w64 <= F64_BOUND && w32 <= F32_BOUND) {
             failures.push(format!("{name}: f64 {w64:.2e}, f32 {w32:.2e}"));

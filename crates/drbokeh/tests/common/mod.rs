@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use drbokeh::{
-    render_with_tape_on, Aperture, Engine, Image, Layer, LayerStack, NoProgress, Real,
-    RenderSettings, Window,
+    render_with_tape_on, Aperture, Engine, Gradients, Image, Layer, LayerGradients, LayerStack,
+    NoProgress, Real, RenderSettings, Window,
 };
 
 /// SplitMix64: tiny, deterministic, good enough for test data.
@@ -98,4 +98,54 @@ pub fn tape_bits(
         );
     }
     (bits, r.blur_k.to_bits(), r.focus.to_bits())
+}
+
+/// Renders `stack` on `engine` with a tape and back-propagates `g`: every gradient, in f64.
+pub fn tape_gradients<T: Real>(
+    stack: &LayerStack<T>,
+    s: &RenderSettings,
+    g: &Image<T>,
+    engine: Engine,
+) -> Gradients<f64> {
+    let (_, tape) = render_with_tape_on(stack, s, engine, &NoProgress).unwrap();
+    assert_eq!(tape.engine(), engine);
+    let r = tape.backward(g, &NoProgress).unwrap();
+    Gradients {
+        layers: r
+            .layers
+            .iter()
+            .map(|l| LayerGradients {
+                rgb: l.rgb.cast(),
+                alpha: l.alpha.cast(),
+                disparity: l.disparity.cast(),
+            })
+            .collect(),
+        blur_k: r.blur_k,
+        focus: r.focus,
+    }
+}
+
+/// Two layers: a front layer of patchy alpha (exact zeros and ones) at disparity 0.95, and
+/// a background out of focus (0.95) in its first 128 rows and near focus below, its
+/// disparities spread by 0.7 across the columns: at K 5 that spread needs more
+/// interpolation points than the span engine takes, so `auto` renders those band-layers
+/// with taps and the others with spans.
+pub fn mixed_stack<T: Real>(w: usize, h: usize) -> LayerStack<T> {
+    let mut front = Layer::<f64>::constant(w, h, [0.9, 0.4, 0.1], 0.0, 0.95);
+    let mut back = Layer::<f64>::constant(w, h, [0.0; 3], 1.0, 0.5);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            front.alpha.data[i] = (((x / 6 + y / 9) % 4) as f64 / 3.0).min(1.0);
+            for c in 0..3 {
+                back.rgb_encoded.data[3 * i + c] = ((x / 5 + y / 7 + c) % 3) as f64 / 2.0;
+            }
+            back.disparity.data[i] = if y < 128 {
+                0.95
+            } else {
+                0.15 + 0.7 * x as f64 / w as f64
+            };
+        }
+    }
+    LayerStack::new(vec![front, back]).unwrap().cast()
 }
