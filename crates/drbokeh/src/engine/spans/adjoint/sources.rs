@@ -47,6 +47,13 @@ const COMPONENTS: usize = 4;
 /// `backward_reach`).
 pub(super) const TAP_ROW_TAIL_PX: f64 = SCATTER_TAIL_PX + 1.5;
 
+/// The reach of pass B for a source of radius `r`: `r + 6` clipped to the window, whole
+/// pixels (every path of pass B: source by source, groups, correlations).
+#[inline(always)]
+fn reach<T: Real>(r: T, table: &GaugeTable<T>) -> isize {
+    (r.f64() + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize
+}
+
 /// A sparse set of receivers per image row: prefix counts (`w + 1` per row) and columns.
 struct RowSet {
     count: Vec<u32>,
@@ -291,7 +298,6 @@ fn source_row<T: Real>(
 ) -> (Vec<[T; 5]>, f64) {
     let src = ctx.src;
     let (stride, pad) = (src.stride, src.pad);
-    let big_r = table.big_r as f64;
     let mut out = vec![[T::zero(); 5]; stride];
     let mut k_row = 0.0f64;
     let mut px = 0;
@@ -354,7 +360,7 @@ fn source_row<T: Real>(
         px += 1;
         let (a, r) = (src.alpha[p], src.radius[p]);
         let (xs, ys) = (q as isize - pad as isize, py as isize - pad as isize);
-        let reach = (r.f64() + TAP_ROW_TAIL_PX).min(big_r).floor() as isize;
+        let reach = reach(r, table);
         if !data
             .nonzero
             .any((xs - reach, xs + reach), (ys - reach, ys + reach))
@@ -602,7 +608,7 @@ fn source_sums<T: Real, const SHARP: bool>(
     let (w, h) = (ctx.rcv.width as isize, ctx.rcv.height as isize);
     let rings = Rings::of(ctx.src.step);
     let rf = src.terms.radius.f64();
-    let reach = (rf + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize;
+    let reach = reach(src.terms.radius, table);
     let mut acc: Sums<T> = [T::zero(); 6];
     let mut lanes: LaneSums<T> = [[T::zero(); LANES]; 6];
     // Whether a tail receiver lies within the reach's bounding box at all.

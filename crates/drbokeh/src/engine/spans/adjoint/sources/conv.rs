@@ -194,8 +194,7 @@ pub(super) fn segment<T: Real, const SHARP: bool>(
         py as isize - src.pad as isize,
     );
     let r = src.radius[p0];
-    let rf = r.f64();
-    let reach = (rf + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize;
+    let reach = super::reach(r, table);
     let last = m as isize - 1;
     let (cols, rows) = ((xs0 - reach, xs0 + last + reach), (ys - reach, ys + reach));
     if !data.nonzero.any(cols, rows) {

@@ -14,7 +14,7 @@
 //! within the image's columns ([`groupable`]): no tap of it is clipped.
 
 use super::{
-    add_tap, load, occlusion, source_out, LaneSums, RowData, Source, Sums, COMPONENTS,
+    add_tap, load, occlusion, reach, source_out, LaneSums, RowData, Source, Sums, COMPONENTS,
     TAP_ROW_TAIL_PX,
 };
 use crate::engine::fast::adjoint::{Ctx, SourceTerms};
@@ -34,12 +34,6 @@ struct Group<T> {
     xs: isize,
     /// Some source has alpha > 0: every sum; else only `sum gc S O`.
     full: bool,
-}
-
-/// The reach of pass B for radius `r`: `r + 6` clipped to the window (as source by source).
-#[inline(always)]
-fn reach<T: Real>(r: T, table: &GaugeTable<T>) -> isize {
-    (r.f64() + TAP_ROW_TAIL_PX).min(table.big_r as f64).floor() as isize
 }
 
 /// Whether the padded sources `px .. px + LANES` of row `py` form a group: one radius
