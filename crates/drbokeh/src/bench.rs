@@ -513,7 +513,8 @@ pub struct AdjointRow {
     pub backward_fast: f64,
     /// `backward_fast / forward_fast`.
     pub backward_over_forward: f64,
-    /// Wall seconds of `render(.., Engine::Auto, ..)` (spans where they are cheaper).
+    /// Wall seconds of `render(.., Engine::Auto, ..)` (spans where they are cheaper);
+    /// this and the next two: medians of 5 rounds.
     pub forward_auto: f64,
     /// Wall seconds of the auto forward with tape (the span render, recorded).
     pub forward_tape_auto: f64,
@@ -570,16 +571,25 @@ pub fn run_adjoint(w: &Workload, with_threaded: bool) -> Result<AdjointRow> {
     let fast = tape.backward(&g, &NoProgress)?;
     let backward_fast = t.elapsed().as_secs_f64();
     drop(tape);
-    let t = Instant::now();
-    render_with_stats(&w.stack, &w.settings, Engine::Auto, &NoProgress)?;
-    let forward_auto = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let (_, tape) = render_with_tape_on(&w.stack, &w.settings, Engine::Auto, &NoProgress)?;
-    let forward_tape_auto = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let auto = tape.backward(&g, &NoProgress)?;
-    let backward_auto = t.elapsed().as_secs_f64();
-    drop(tape);
+    // The span adjoint takes a fraction of a second: forward, forward with tape and
+    // backward in turn, AUTO_ROUNDS times, each reported as its median (one slow round on
+    // a shared machine would otherwise decide the ratio).
+    let (mut fwd, mut fwd_tape, mut bwd) = (Vec::new(), Vec::new(), Vec::new());
+    let mut auto = None;
+    for _ in 0..AUTO_ROUNDS {
+        let t = Instant::now();
+        render_with_stats(&w.stack, &w.settings, Engine::Auto, &NoProgress)?;
+        fwd.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let (_, tape) = render_with_tape_on(&w.stack, &w.settings, Engine::Auto, &NoProgress)?;
+        fwd_tape.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        auto = Some(tape.backward(&g, &NoProgress)?);
+        bwd.push(t.elapsed().as_secs_f64());
+    }
+    let auto = auto.expect("AUTO_ROUNDS > 0");
+    let (forward_auto, forward_tape_auto, backward_auto) =
+        (median(fwd), median(fwd_tape), median(bwd));
     let mut row = AdjointRow {
         workload: w.name.clone(),
         forward_fast,
@@ -608,6 +618,16 @@ pub fn run_adjoint(w: &Workload, with_threaded: bool) -> Result<AdjointRow> {
         row.max_grad = Some(max);
     }
     Ok(row)
+}
+
+/// Rounds of the span adjoint's forward, forward with tape and backward in
+/// [`run_adjoint`] (medians reported).
+const AUTO_ROUNDS: usize = 5;
+
+/// The median of `v` (the upper one of an even count); `v` is not empty.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// The largest absolute difference between two sets of gradients (all layers and kinds),

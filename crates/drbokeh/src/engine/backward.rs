@@ -149,7 +149,7 @@ fn receiver_gradients<T: Real>(
         });
     (0..n_layers)
         .map(|l| {
-            let layer = || per_pixel.iter().skip(l).step_by(n_layers);
+            let layer = || (0..n).into_par_iter().map(|i| &per_pixel[i * n_layers + l]);
             ReceiverGrads {
                 d_colour_sum: layer().map(|p| p.colour_sum).collect(),
                 d_weight_sum: layer().map(|p| p.weight_sum).collect(),
@@ -170,23 +170,24 @@ fn source_derivatives<T: Real>(
     let (w, h) = (stack.width, stack.height);
     let (mut dlin_dencoded, mut dlin_ddisp) = (Vec::new(), Vec::new());
     for layer in &stack.layers {
-        let (mut di, mut dd) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h));
-        for (px, &disp) in layer
+        // Per pixel and independent: in parallel, each value as computed alone.
+        let (di, dd): (Vec<[T; 3]>, Vec<[T; 3]>) = layer
             .rgb_encoded
             .data
-            .chunks_exact(3)
+            .par_chunks_exact(3)
             .zip(&layer.disparity.data)
-        {
-            let d = pixel.rel_disp(disp);
-            let (mut a, mut b) = ([T::zero(); 3], [T::zero(); 3]);
-            for c in 0..3 {
-                let (_, x, y) = pixel.linear_with_derivatives(px[c], d);
-                a[c] = x;
-                b[c] = y;
-            }
-            di.push(a);
-            dd.push(b);
-        }
+            .map(|(px, &disp)| {
+                let d = pixel.rel_disp(disp);
+                let (mut a, mut b) = ([T::zero(); 3], [T::zero(); 3]);
+                for c in 0..3 {
+                    let (_, x, y) = pixel.linear_with_derivatives(px[c], d);
+                    a[c] = x;
+                    b[c] = y;
+                }
+                (a, b)
+            })
+            .unzip();
+        debug_assert_eq!(di.len(), w * h);
         dlin_dencoded.push(di);
         dlin_ddisp.push(dd);
     }
@@ -198,23 +199,31 @@ fn source_derivatives<T: Real>(
 fn layer_gradients<T: Real>(
     (w, h): (usize, usize),
     g_lin: &[[T; 3]],
-    g_alpha: impl Fn(usize) -> T,
-    g_disp: impl Fn(usize) -> T,
+    g_alpha: impl Fn(usize) -> T + Sync,
+    g_disp: impl Fn(usize) -> T + Sync,
     dlin_dencoded: &[[T; 3]],
     dlin_ddisp: &[[T; 3]],
 ) -> LayerGradients<T> {
     let mut rgb = Image::new(w, h, 3);
     let mut alpha = Image::new(w, h, 1);
     let mut disparity = Image::new(w, h, 1);
-    for i in 0..w * h {
-        let mut g_d = g_disp(i);
-        for c in 0..3 {
-            rgb.data[3 * i + c] = g_lin[i][c] * dlin_dencoded[i][c];
-            g_d = g_d + g_lin[i][c] * dlin_ddisp[i][c];
-        }
-        alpha.data[i] = g_alpha(i);
-        disparity.data[i] = g_d;
-    }
+    rgb.data
+        .par_chunks_mut(3 * w)
+        .zip(alpha.data.par_chunks_mut(w))
+        .zip(disparity.data.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(y, ((rgb, alpha), disparity))| {
+            for x in 0..w {
+                let i = y * w + x;
+                let mut g_d = g_disp(i);
+                for c in 0..3 {
+                    rgb[3 * x + c] = g_lin[i][c] * dlin_dencoded[i][c];
+                    g_d = g_d + g_lin[i][c] * dlin_ddisp[i][c];
+                }
+                alpha[x] = g_alpha(i);
+                disparity[x] = g_d;
+            }
+        });
     LayerGradients {
         rgb,
         alpha,

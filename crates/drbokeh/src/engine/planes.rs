@@ -41,12 +41,17 @@ pub(crate) struct Planes<T> {
 /// For padded rows `y0 - pad .. y1 + pad` and columns `-pad .. w + pad`, the index of the
 /// image pixel each mirrors ([`model::reflect`]).
 fn mirror_indices(w: usize, h: usize, (y0, y1): (usize, usize), pad: usize) -> Vec<usize> {
-    (0..y1 - y0 + 2 * pad)
-        .flat_map(|py| {
+    let stride = w + 2 * pad;
+    let mut out = vec![0usize; (y1 - y0 + 2 * pad) * stride];
+    out.par_chunks_mut(stride)
+        .enumerate()
+        .for_each(|(py, row)| {
             let sy = model::reflect(y0 as isize + py as isize - pad as isize, h);
-            (0..w + 2 * pad).map(move |px| sy * w + model::reflect(px as isize - pad as isize, w))
-        })
-        .collect()
+            for (px, v) in row.iter_mut().enumerate() {
+                *v = sy * w + model::reflect(px as isize - pad as isize, w);
+            }
+        });
+    out
 }
 
 impl<T: Real> Planes<T> {

@@ -100,8 +100,9 @@ impl Tone {
                 let (gamma, offset) = (T::c(self.gamma), T::c(self.offset));
                 let base = encoded + offset;
                 let lin = base.powf(gamma);
+                // g base^(g-1) = g lin / base: one power instead of two.
                 let dlin = if base > T::zero() {
-                    gamma * base.powf(gamma - T::one())
+                    gamma * lin / base
                 } else {
                     T::zero()
                 };

@@ -7,6 +7,7 @@ use crate::engine::planes::Planes;
 use crate::model::{self, ApertureEval};
 use crate::presets::RenderSettings;
 use crate::Real;
+use rayon::prelude::*;
 
 /// Shared read-only state of the passes over one layer.
 pub(in crate::engine) struct Ctx<'a, T> {
@@ -46,15 +47,16 @@ impl<T: Real> Receivers<T> {
         let cutoff = T::c(FOCUS_WEIGHT_CUTOFF);
         let e: Vec<T> = layer
             .focus_weight
-            .iter()
+            .par_iter()
             .map(|&e| if e >= cutoff { e } else { T::zero() })
             .collect();
+        let channel = |c: usize| rg.d_colour_sum.par_iter().map(|g| g[c]).collect();
         Receivers {
             width: layer.width,
             height: layer.height,
-            g_red: rg.d_colour_sum.iter().map(|g| g[0]).collect(),
-            g_green: rg.d_colour_sum.iter().map(|g| g[1]).collect(),
-            g_blue: rg.d_colour_sum.iter().map(|g| g[2]).collect(),
+            g_red: channel(0),
+            g_green: channel(1),
+            g_blue: channel(2),
             g_weight: rg.d_weight_sum,
             g_coverage: rg.d_coverage,
             focus_weight: e,

@@ -21,26 +21,39 @@ pub(super) fn pass_coverage_box<T: Real>(ctx: &Ctx<'_, T>) -> Vec<T> {
     let big_r = ctx.tables.big_r;
     let half: Vec<usize> = rcv
         .radius
-        .iter()
+        .par_iter()
         .map(|&r| model::coverage_half_size_px(r, big_r))
         .collect();
-    let mut sizes: Vec<usize> = half.clone();
-    sizes.sort_unstable();
-    sizes.dedup();
+    // The half-sizes that occur (at most R + 1 of them), in increasing order.
+    let mut occurs = vec![false; big_r + 1];
+    for &hs in &half {
+        occurs[hs.min(big_r)] = true;
+    }
+    let sizes: Vec<usize> = (0..=big_r).filter(|&hs| occurs[hs]).collect();
     let s1 = w + 1;
     let mut padded = vec![0.0f64; src.rows * stride];
     for &hs in &sizes {
         let n = ((2 * hs + 1) * (2 * hs + 1)) as f64;
-        // SAT over the image receivers of share(x) where h(x) == hs.
+        // SAT over the image receivers of share(x) where h(x) == hs: row prefix sums in
+        // parallel, then each row adds the one above (the same sums as row by row).
         let mut sat = vec![0.0f64; (h + 1) * s1];
-        for y in 0..h {
-            let mut run = 0.0;
-            for x in 0..w {
-                let i = y * w + x;
-                if half[i] == hs {
-                    run += rcv.g_coverage[i].f64() / n;
+        sat[s1..]
+            .par_chunks_mut(s1)
+            .enumerate()
+            .for_each(|(y, row)| {
+                let mut run = 0.0;
+                for x in 0..w {
+                    let i = y * w + x;
+                    if half[i] == hs {
+                        run += rcv.g_coverage[i].f64() / n;
+                    }
+                    row[x + 1] = run;
                 }
-                sat[(y + 1) * s1 + x + 1] = sat[y * s1 + x + 1] + run;
+            });
+        for y in 1..h {
+            let (above, row) = sat.split_at_mut((y + 1) * s1);
+            for (v, &a) in row[..s1].iter_mut().zip(&above[y * s1..]) {
+                *v += a;
             }
         }
         let hs = hs as isize;

@@ -172,16 +172,25 @@ pub(in crate::engine) fn backward_with<T: Real>(
         progress,
         || prepare(stack, settings, soft_disc.map(|h| h.sums)),
         |state| {
-            // The soft disc's recomputed coverage replaces the recorded one.
-            let saved: Vec<Vec<LayerAtPixel<T>>> = saved
+            // The soft disc's recomputed coverage replaces the recorded one (the box's
+            // recorded sums are used as they are).
+            let saved: Vec<Cow<'_, [LayerAtPixel<T>]>> = saved
                 .iter()
                 .zip(&state.discs)
                 .map(|(saved, discs)| {
-                    let mut saved = saved.clone();
-                    for (s, d) in saved.iter_mut().zip(discs) {
-                        s.coverage = d.value();
+                    if discs.is_empty() {
+                        return Cow::Borrowed(&saved[..]);
                     }
-                    saved
+                    Cow::Owned(
+                        saved
+                            .par_iter()
+                            .zip(discs)
+                            .map(|(s, d)| LayerAtPixel {
+                                coverage: d.value(),
+                                ..*s
+                            })
+                            .collect(),
+                    )
                 })
                 .collect();
             // Receivers whose weight sum is of the order of the dropped tail: their

@@ -3,10 +3,11 @@
 //!
 //! Only sources with alpha != 0 add to `W`, `C` and the soft disc's `sum S a`: each window
 //! row is cut into the runs of such sources ([`AlphaRuns`]; zero gaps of at most [`GAP`]
-//! taps stay inside a run, where their terms are exactly 0), and each run is summed by the
-//! fast engine's vectorised gather ([`gather_segment`], the model's terms in their fast
-//! form: `exp` through [`Real::exp_fast`], below 4e-7 relative error for f32, the standard
-//! `exp` for f64). The soft disc's `Z = sum S` over the whole window depends on `r_c` only
+//! taps stay inside a run, where their terms are exactly 0), and each run is summed in
+//! [`LANES`] lanes kept over the receiver's whole window and reduced once (the fast
+//! engine's tap weight, the model's terms in their fast form: `exp` through
+//! [`Real::exp_fast`], below 4e-7 relative error for f32, the standard `exp` for f64;
+//! kernel apertures through the forward's [`gather_segment`]). The soft disc's `Z = sum S` over the whole window depends on `r_c` only
 //! and is summed once per run of receivers with the same `r_c`. Every tap of the window
 //! is summed: the result is the scalar whole-window sum (`tests::reference_row`) up to
 //! float rounding (tested to 1e-12 relative in f64, 1e-5 in f32).
@@ -45,12 +46,11 @@ pub(super) fn refine_small_weights<T: Real>(
 ) -> Vec<LayerAtPixel<T>> {
     let w = src.stride - 2 * tables.big_r;
     let ctx = RefineCtx::new(src, tables, aperture, settings);
-    let rows: Vec<Vec<LayerAtPixel<T>>> = saved
+    saved
         .par_chunks(w)
         .enumerate()
-        .map(|(y, row)| refine_row_dispatch(&ctx, row, y))
-        .collect();
-    rows.concat()
+        .flat_map_iter(|(y, row)| refine_row_dispatch(&ctx, row, y))
+        .collect()
 }
 
 /// Per padded source pixel, within its padded row: the column of the first source at or
@@ -289,6 +289,8 @@ fn window_runs<T: Real, const KIND: u8>(
     let col = xi % stride;
     let mut acc = [T::zero(); 3];
     let mut weight = T::zero();
+    // The lanes of every run of the window, reduced once at the end (in lane order).
+    let mut lanes = [[T::zero(); LANES]; 4];
     for dy in -big_r..=big_r {
         let Some(hw) = ctx.widths[(dy + big_r) as usize] else {
             continue;
@@ -306,38 +308,47 @@ fn window_runs<T: Real, const KIND: u8>(
             // Window offsets dx = start - col .., at gauge columns dx + R.
             let run = (row + start, n);
             let gauge = (&tables.gauge[t][..], start + tables.big_r - col);
-            let (sums, wsum) = match KIND {
-                1 => run_lanes::<T, false, false>(src, run, gauge, d_x, e_x),
-                2 => run_lanes::<T, true, false>(src, run, gauge, d_x, e_x),
-                3 => run_lanes::<T, false, true>(src, run, gauge, d_x, e_x),
-                4 => run_lanes::<T, true, true>(src, run, gauge, d_x, e_x),
-                _ => gather_segment(
-                    src,
-                    tables,
-                    ctx.aperture,
-                    row + start,
-                    n,
-                    (start as isize - col as isize, dy),
-                    d_x,
-                    e_x,
-                    e_x > T::zero(),
-                ),
-            };
-            for c in 0..3 {
-                acc[c] = acc[c] + sums[c];
+            match KIND {
+                1 => run_lanes::<T, false, false>(src, run, gauge, d_x, e_x, &mut lanes),
+                2 => run_lanes::<T, true, false>(src, run, gauge, d_x, e_x, &mut lanes),
+                3 => run_lanes::<T, false, true>(src, run, gauge, d_x, e_x, &mut lanes),
+                4 => run_lanes::<T, true, true>(src, run, gauge, d_x, e_x, &mut lanes),
+                _ => {
+                    let (sums, wsum) = gather_segment(
+                        src,
+                        tables,
+                        ctx.aperture,
+                        row + start,
+                        n,
+                        (start as isize - col as isize, dy),
+                        d_x,
+                        e_x,
+                        e_x > T::zero(),
+                    );
+                    for c in 0..3 {
+                        acc[c] = acc[c] + sums[c];
+                    }
+                    weight = weight + wsum;
+                }
             }
-            weight = weight + wsum;
             if end > last {
                 break;
             }
             from = end;
         }
     }
+    if KIND != 0 {
+        for c in 0..3 {
+            acc[c] = lane_sum(&lanes[c]);
+        }
+        weight = lane_sum(&lanes[3]);
+    }
     (acc, weight)
 }
 
 /// The sums `sum c Ilin` and `sum c` of the run of `n` sources from padded index `at`,
-/// at gauge columns `g0..` of `gauge` (the window row's), in [`LANES`] lanes: the fast
+/// at gauge columns `g0..` of `gauge` (the window row's), added to the [`LANES`] lanes
+/// `sums` (`[C_r, C_g, C_b, W]`, reduced by the caller once per receiver): the fast
 /// forward's tap weight (`gather_segment`) with the step `SHARP` and the occlusion when
 /// `OCCLUDING`. The last partial chunk is a whole chunk of neighbouring taps (inside the
 /// planes and the window row) with alpha taken as 0 outside the run, whose weight is then
@@ -350,19 +361,11 @@ fn run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
     (gauge, g0): (&[T], usize),
     d_x: T,
     e_x: T,
-) -> ([T; 3], T) {
-    let mut sums = [[T::zero(); LANES]; 4];
+    sums: &mut [[T; LANES]; 4],
+) {
     let mut i = 0;
     while i + LANES <= n {
-        tap_lanes::<T, OCCLUDING, SHARP>(
-            src,
-            at + i,
-            &gauge[g0 + i..],
-            0..LANES,
-            d_x,
-            e_x,
-            &mut sums,
-        );
+        tap_lanes::<T, OCCLUDING, SHARP>(src, at + i, &gauge[g0 + i..], 0..LANES, d_x, e_x, sums);
         i += LANES;
     }
     if i < n {
@@ -377,10 +380,10 @@ fn run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
                 back..LANES,
                 d_x,
                 e_x,
-                &mut sums,
+                sums,
             );
         } else if at + LANES <= src.alpha.len() && g0 + LANES <= gauge.len() {
-            tap_lanes::<T, OCCLUDING, SHARP>(src, at, &gauge[g0..], 0..m, d_x, e_x, &mut sums);
+            tap_lanes::<T, OCCLUDING, SHARP>(src, at, &gauge[g0..], 0..m, d_x, e_x, sums);
         } else if at >= LANES - m && g0 >= LANES - m {
             let back = LANES - m;
             tap_lanes::<T, OCCLUDING, SHARP>(
@@ -390,7 +393,7 @@ fn run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
                 back..LANES,
                 d_x,
                 e_x,
-                &mut sums,
+                sums,
             );
         } else {
             // A window narrower than LANES at the planes' corner: tap by tap.
@@ -410,10 +413,6 @@ fn run_lanes<T: Real, const OCCLUDING: bool, const SHARP: bool>(
             }
         }
     }
-    (
-        [lane_sum(&sums[0]), lane_sum(&sums[1]), lane_sum(&sums[2])],
-        lane_sum(&sums[3]),
-    )
 }
 
 /// The [`LANES`] values of `plane` from index `at`.

@@ -9,6 +9,7 @@ use super::context::{Ctx, Receivers};
 use super::SourceGradients;
 use crate::engine::fast::runs::{centre_scatter, for_each_lane, lane_sum, CHUNK, LANES};
 use crate::engine::fast::tiles::{backward_reach, TILE, TILE_ROWS};
+use crate::engine::planes::Planes;
 use crate::engine::simd::avx2_dispatch;
 use crate::model::{self, ApertureEval, ScatterStep};
 use crate::Real;
@@ -28,34 +29,58 @@ pub(in crate::engine) fn pass_sources<T: Real>(
         .into_par_iter()
         .map(|y0| sources_tile_row_dispatch(ctx, &occluding, y0))
         .collect();
-    gather_source_terms(tiles, &src.source, ctx.rcv.width * ctx.rcv.height)
+    gather_source_terms(tiles, src, (ctx.rcv.width, ctx.rcv.height))
 }
 
-/// Adds per-source terms `[dIlin (3), da, dd]`, produced in source order in chunks (each
-/// with its share of K's gradient), onto the image pixels `source[p]` they belong to
-/// (padded sources fold onto their mirrored pixel), in that fixed order: deterministic.
+/// Adds per-source terms `[dIlin (3), da, dd]`, produced in source order in chunks of
+/// whole padded rows (each with its share of K's gradient), onto the image pixels
+/// `src.source[p]` they belong to (padded sources fold onto their mirrored pixel), in a
+/// fixed order: each pixel's own term first (image rows in parallel), then the padding's
+/// terms in padded order. Deterministic for any thread count.
 pub(in crate::engine) fn gather_source_terms<T: Real>(
     chunks: Vec<(Vec<[T; 5]>, f64)>,
-    source: &[usize],
-    n: usize,
+    src: &Planes<T>,
+    (w, h): (usize, usize),
 ) -> SourceGradients<T> {
+    let (stride, pad) = (src.stride, src.pad);
+    let k_total: f64 = chunks.iter().map(|c| c.1).sum();
+    let rows: Vec<&[[T; 5]]> = chunks
+        .iter()
+        .flat_map(|(chunk, _)| chunk.chunks(stride))
+        .collect();
+    debug_assert_eq!(rows.len(), src.rows);
+    let n = w * h;
     let (mut g_lin, mut g_a, mut g_d) = (
         vec![[T::zero(); 3]; n],
         vec![T::zero(); n],
         vec![T::zero(); n],
     );
-    let mut k_total = 0.0;
-    let mut p = 0;
-    for (chunk, k) in chunks {
-        k_total += k;
-        for v in chunk {
-            let s = source[p];
+    g_lin
+        .par_chunks_mut(w)
+        .zip(g_a.par_chunks_mut(w))
+        .zip(g_d.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(y, ((lin, a), d))| {
+            let own = &rows[y + pad][pad..pad + w];
+            for x in 0..w {
+                let v = own[x];
+                lin[x] = [v[0], v[1], v[2]];
+                a[x] = v[3];
+                d[x] = v[4];
+            }
+        });
+    for (py, row) in rows.iter().enumerate() {
+        let inside = py >= pad && py < h + pad;
+        for (px, v) in row.iter().enumerate() {
+            if inside && px >= pad && px < w + pad {
+                continue;
+            }
+            let s = src.source[py * stride + px];
             for c in 0..3 {
                 g_lin[s][c] = g_lin[s][c] + v[c];
             }
             g_a[s] = g_a[s] + v[3];
             g_d[s] = g_d[s] + v[4];
-            p += 1;
         }
     }
     (g_lin, g_a, g_d, k_total)

@@ -62,19 +62,29 @@ struct RowSet {
 }
 
 impl RowSet {
-    fn new(w: usize, h: usize, member: impl Fn(usize) -> bool) -> Self {
-        let mut count = vec![0u32; h * (w + 1)];
+    /// The set of `member` (one flag per pixel of a `w x h` image), rows in parallel.
+    fn new(w: usize, h: usize, member: &[bool]) -> Self {
+        let rows: Vec<(Vec<u32>, Vec<u32>)> = member
+            .par_chunks(w)
+            .map(|row| {
+                let mut count = vec![0u32; w + 1];
+                let mut cols = Vec::new();
+                for (x, &inside) in row.iter().enumerate() {
+                    count[x + 1] = count[x] + u32::from(inside);
+                    if inside {
+                        cols.push(x as u32);
+                    }
+                }
+                (count, cols)
+            })
+            .collect();
+        let mut count = Vec::with_capacity(h * (w + 1));
         let mut cols = Vec::new();
         let mut start = Vec::with_capacity(h + 1);
-        for y in 0..h {
+        for (c, members) in rows {
             start.push(cols.len());
-            for x in 0..w {
-                let inside = member(y * w + x);
-                count[y * (w + 1) + x + 1] = count[y * (w + 1) + x] + u32::from(inside);
-                if inside {
-                    cols.push(x as u32);
-                }
-            }
+            count.extend_from_slice(&c);
+            cols.extend_from_slice(&members);
         }
         start.push(cols.len());
         RowSet { count, cols, start }
@@ -121,9 +131,9 @@ impl<T: Real> PaddedRows<T> {
         let stride = w + LANES;
         let pad = |v: &[T]| {
             let mut out = vec![T::zero(); h * stride];
-            for y in 0..h {
-                out[y * stride..y * stride + w].copy_from_slice(&v[y * w..(y + 1) * w]);
-            }
+            out.par_chunks_mut(stride)
+                .zip(v.par_chunks(w))
+                .for_each(|(out, row)| out[..w].copy_from_slice(row));
             out
         };
         PaddedRows {
@@ -168,14 +178,23 @@ struct Area {
 }
 
 impl Area {
-    fn new(w: usize, h: usize, member: impl Fn(usize) -> bool) -> Self {
+    /// The summed-area count of `member` (one flag per pixel of a `w x h` image): row
+    /// prefix counts in parallel, then the rows accumulated downwards.
+    fn new(w: usize, h: usize, member: &[bool]) -> Self {
         let s1 = w + 1;
         let mut count = vec![0u32; (h + 1) * s1];
-        for y in 0..h {
-            let mut run = 0u32;
-            for x in 0..w {
-                run += u32::from(member(y * w + x));
-                count[(y + 1) * s1 + x + 1] = count[y * s1 + x + 1] + run;
+        count[s1..]
+            .par_chunks_mut(s1)
+            .zip(member.par_chunks(w))
+            .for_each(|(out, row)| {
+                for (x, &inside) in row.iter().enumerate() {
+                    out[x + 1] = out[x] + u32::from(inside);
+                }
+            });
+        for y in 1..h {
+            let (above, row) = count.split_at_mut((y + 1) * s1);
+            for (c, &a) in row[..s1].iter_mut().zip(&above[y * s1..]) {
+                *c += a;
             }
         }
         Area {
@@ -210,28 +229,41 @@ pub(super) fn pass_sources<T: Real>(
 ) -> SourceGradients<T> {
     let (src, rcv) = (ctx.src, ctx.rcv);
     let (w, h) = (rcv.width, rcv.height);
-    let is_nonzero = |i: usize| {
-        rcv.g_red[i] != T::zero()
-            || rcv.g_green[i] != T::zero()
-            || rcv.g_blue[i] != T::zero()
-            || rcv.g_weight[i] != T::zero()
-    };
+    let nonzero: Vec<bool> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            rcv.g_red[i] != T::zero()
+                || rcv.g_green[i] != T::zero()
+                || rcv.g_blue[i] != T::zero()
+                || rcv.g_weight[i] != T::zero()
+        })
+        .collect();
     let planes = [&rcv.g_red, &rcv.g_green, &rcv.g_blue, &rcv.g_weight];
     let prefix = planes.map(|plane| {
-        (0..h)
-            .into_par_iter()
-            .flat_map_iter(|y| {
-                let mut row = vec![0.0f64; w + 1];
-                for x in 0..w {
-                    row[x + 1] = row[x] + plane[y * w + x].f64();
+        let mut prefix = vec![0.0f64; h * (w + 1)];
+        prefix
+            .par_chunks_mut(w + 1)
+            .zip(plane.par_chunks(w))
+            .for_each(|(out, row)| {
+                for (x, v) in row.iter().enumerate() {
+                    out[x + 1] = out[x] + v.f64();
                 }
-                row
-            })
-            .collect()
+            });
+        prefix
     });
-    let is_tail = |i: usize| tail[i] && is_nonzero(i);
-    let tail_plane: Vec<T> = (0..w * h)
-        .map(|i| if is_tail(i) { T::one() } else { T::zero() })
+    let is_tail: Vec<bool> = tail
+        .par_iter()
+        .zip(&nonzero)
+        .map(|(&t, &n)| t && n)
+        .collect();
+    let tail_plane: Vec<T> = is_tail
+        .par_iter()
+        .map(|&t| if t { T::one() } else { T::zero() })
+        .collect();
+    let focus: Vec<bool> = rcv
+        .focus_weight
+        .par_iter()
+        .map(|&e| e > T::zero())
         .collect();
     let shared = !crate::engine::paths::source_by_source();
     let circle = matches!(shape, Shape::Circle);
@@ -241,16 +273,16 @@ pub(super) fn pass_sources<T: Real>(
         rows: PaddedRows::new(rcv, &tail_plane),
         prefix,
         groups: shared,
-        focus: RowSet::new(w, h, |i| rcv.focus_weight[i] > T::zero()),
-        tail: RowSet::new(w, h, is_tail),
-        nonzero: Area::new(w, h, is_nonzero),
-        tail_area: Area::new(w, h, is_tail),
+        focus: RowSet::new(w, h, &focus),
+        tail: RowSet::new(w, h, &is_tail),
+        nonzero: Area::new(w, h, &nonzero),
+        tail_area: Area::new(w, h, &is_tail),
     };
     let rows: Vec<(Vec<[T; 5]>, f64)> = (0..src.rows)
         .into_par_iter()
         .map(|py| source_row_dispatch(ctx, shape, table, span_rows, &data, py))
         .collect();
-    gather_source_terms(rows, &src.source, w * h)
+    gather_source_terms(rows, src, (w, h))
 }
 
 avx2_dispatch!(
