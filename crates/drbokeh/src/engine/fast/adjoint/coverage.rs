@@ -32,11 +32,13 @@ pub(super) fn pass_coverage_box<T: Real>(ctx: &Ctx<'_, T>) -> Vec<T> {
     let sizes: Vec<usize> = (0..=big_r).filter(|&hs| occurs[hs]).collect();
     let s1 = w + 1;
     let mut padded = vec![0.0f64; src.rows * stride];
+    // One table for every half-size: each fills all of it but the first row and column,
+    // which stay 0.
+    let mut sat = vec![0.0f64; (h + 1) * s1];
     for &hs in &sizes {
         let n = ((2 * hs + 1) * (2 * hs + 1)) as f64;
         // SAT over the image receivers of share(x) where h(x) == hs: row prefix sums in
         // parallel, then each row adds the one above (the same sums as row by row).
-        let mut sat = vec![0.0f64; (h + 1) * s1];
         sat[s1..]
             .par_chunks_mut(s1)
             .enumerate()
