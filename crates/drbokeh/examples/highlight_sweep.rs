@@ -7,6 +7,11 @@
 //! `PRESET` is `physical` or `paper`; each `SPEC` is `off`, `paper` (the paper's boost) or
 //! `GAIN:THRESHOLD`, optionally followed by `+paper` (with the paper's boost as well) and `/single` (one opaque layer instead of the
 //! decomposition).
+//!
+//! `SWEEP_SCENES=1` also prints each scene's PSNR; `SWEEP_DUMP=DIR` writes, per scene,
+//! `DIR/<benchmark>/<scene>/<spec>.npy` (display-encoded renders, float32) next to
+//! `scatter.npy`, `gt.npy` (physical on the true layers), `truth.npy` and `aif.npy`, for
+//! looking at where the error lies.
 
 use drbokeh::eval::metrics::psnr;
 use drbokeh::eval::report::{
@@ -44,12 +49,36 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         .push(v);
                 }
             };
+            let dump = std::env::var_os("SWEEP_DUMP").map(|d| {
+                std::path::PathBuf::from(d)
+                    .join(std::path::Path::new(bench).file_name().unwrap_or_default())
+                    .join(dir.file_name().unwrap_or_default())
+            });
+            let save = |name: &str,
+                        img: &drbokeh::image::Image<f32>|
+             -> Result<(), Box<dyn std::error::Error>> {
+                if let Some(d) = &dump {
+                    std::fs::create_dir_all(d)?;
+                    let file = d.join(format!("{}.npy", name.replace([':', '/', ',', '='], "_")));
+                    drbokeh::io::write_output(&file, img, drbokeh::io::BitDepth::Sixteen, |v| v)?;
+                }
+                Ok(())
+            };
             let scatter = render_method(Method::Scatter, &scene)?;
             push("scatter", psnr(&scatter, &scene.ground_truth)?);
+            save("scatter", &scatter)?;
+            if dump.is_some() {
+                let gt = render_method(Method::PhysicalGt, &scene)?;
+                save("gt", &gt)?;
+                save("truth", &scene.ground_truth)?;
+                let aif: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
+                save("aif", &aif)?;
+            }
             for spec in &specs {
                 if let Some(mode) = spec.strip_prefix("oracle:") {
                     let out = oracle(mode, &dir, &scene, preset)?;
                     push(spec, psnr(&out, &scene.ground_truth)?);
+                    save(spec, &out)?;
                     continue;
                 }
                 let mut view = View::default();
@@ -82,7 +111,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     view,
                 )?;
                 out.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
-                push(spec, psnr(&out, &scene.ground_truth)?);
+                let p = psnr(&out, &scene.ground_truth)?;
+                if std::env::var_os("SWEEP_SCENES").is_some() {
+                    println!("{bench} {} {spec} {p:.2}", dir.display());
+                }
+                push(spec, p);
+                save(spec, &out)?;
             }
         }
         println!("## {bench} ({preset:?})");

@@ -33,6 +33,12 @@ use crate::image::Image;
 use crate::model::Tone;
 use crate::{Error, Real, Result};
 
+mod depth;
+pub use depth::{
+    lights_at_farthest_depth, LIGHT_REGION_LEVEL, MAX_LIGHT_POINT_AREAS, MIN_FARTHEST_SHARE,
+    SAME_DEPTH_FRACTION,
+};
+
 /// Encoded level at or above which a channel counts as clipped (254.5/255).
 pub const CLIPPED_LEVEL: f64 = 254.5 / 255.0;
 

@@ -371,6 +371,14 @@ fn photo_stack<T: Real>(
         matte,
         layering,
     } = photo;
+    // A clipped light seen past a nearer object's edge is one source at one depth: the
+    // farthest its region shows (highlight::lights_at_farthest_depth). Its mixed edge
+    // pixels are gated, cut and blurred with the light, not with the nearer object.
+    let disparity = match &matte {
+        None => crate::highlight::lights_at_farthest_depth(&rgb_encoded, &disparity)
+            .unwrap_or(disparity),
+        Some(_) => disparity,
+    };
     let rgb_encoded = match &view.photo_highlights {
         PhotoHighlights::Recover(r) => {
             // Focus and blur as they resolve on the image as one layer.

@@ -726,3 +726,40 @@ fn background_behind_thin_strands_is_filled_from_the_gaps() {
     });
     assert!(guarded > 2.0 * default, "guard 2: {guarded} vs {default}");
 }
+
+#[test]
+fn a_clipped_pixel_beyond_a_cut_edge_is_not_feathered_into_the_nearer_layer() {
+    // The two-plane scene; on two rows, the background pixel just left of the rectangle's
+    // first own pixel: one made clipped (a light of the background), one left as it is.
+    let (w, h) = (64, 48);
+    let (mut rgb, disp, ..) = two_planes(w, h);
+    let first_own = |stack: &drbokeh::LayerStack<f64>, y: usize| {
+        (0..w)
+            .find(|&x| stack.layers[0].alpha.at(x, y, 0) == 1.0)
+            .expect("the rectangle crosses the row")
+    };
+    let (y_clip, y_plain) = (20, 26);
+    let before = layers_from_disparity(&rgb, &disp, &LayeringOptions::default()).unwrap();
+    let x_clip = first_own(&before.stack, y_clip) - 1;
+    let x_plain = first_own(&before.stack, y_plain) - 1;
+    assert!(before.stack.layers[0].alpha.at(x_clip, y_clip, 0) > 0.05);
+    for c in 0..3 {
+        *rgb.at_mut(x_clip, y_clip, c) = 1.0;
+    }
+    let d = layers_from_disparity(&rgb, &disp, &LayeringOptions::default()).unwrap();
+    assert_eq!(d.stack.layers.len(), 2);
+    assert_eq!(first_own(&d.stack, y_clip), x_clip + 1, "same labels");
+    let fg = &d.stack.layers[0];
+    // The plain edge pixel is feathered; the clipped one is not (feathered, its light
+    // would spread with the foreground's blur).
+    let plain = fg.alpha.at(x_plain, y_plain, 0);
+    assert!(
+        plain > 0.05 && plain < 1.0,
+        "plain edge pixel alpha {plain}"
+    );
+    assert_eq!(
+        fg.alpha.at(x_clip, y_clip, 0),
+        0.0,
+        "clipped edge pixel alpha"
+    );
+}

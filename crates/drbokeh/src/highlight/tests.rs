@@ -402,3 +402,65 @@ fn gain_follows_the_least_blurred_clipped_pixel_behind() {
     let none = SourceRadii::new(&[1, 3], clipped, d, radius);
     assert_eq!(none.behind(1.0), f64::INFINITY);
 }
+
+#[test]
+fn a_light_across_a_depth_edge_moves_to_the_farthest_depth_a_near_specular_stays() {
+    // 24 x 12, grey; disparity 0 (far) except a near band (0.8) over columns 8..10 and a
+    // near square (0.8) at columns 16..22, rows 2..8.
+    let (w, h) = (24, 12);
+    let mut rgb = Image::<f64>::new(w, h, 3);
+    rgb.data.iter_mut().for_each(|v| *v = 0.3);
+    let mut map = Image::<f64>::new(w, h, 1);
+    for y in 0..h {
+        for x in 0..w {
+            let near = (8..10).contains(&x) || ((16..22).contains(&x) && (2..8).contains(&y));
+            map.data[y * w + x] = if near { 0.8 } else { 0.0 };
+        }
+    }
+    let mut paint = |x0: usize, x1: usize, y0: usize, y1: usize, v: f64| {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for c in 0..3 {
+                    rgb.data[(y * w + x) * 3 + c] = v;
+                }
+            }
+        }
+    };
+    // A clipped light seen across the band (6 of its 12 pixels on the band's depth)...
+    paint(6, 12, 4, 6, 1.0);
+    // ...a clipped specular on the near square whose rim touches one far pixel...
+    paint(17, 22, 3, 6, 1.0);
+    paint(22, 23, 4, 5, 0.95);
+    // ...and a bright but unclipped patch across the band (nothing was lost there).
+    paint(7, 11, 9, 11, 0.95);
+    let before = map;
+    let disp = lights_at_farthest_depth(&rgb, &before).expect("the light moves");
+    for y in 0..h {
+        for x in 0..w {
+            let (b, a) = (before.data[y * w + x], disp.data[y * w + x]);
+            if (8..10).contains(&x) && (4..6).contains(&y) {
+                assert_eq!(a, 0.0, "light pixel ({x},{y}) at the far depth");
+            } else {
+                assert_eq!(a, b, "({x},{y}) unchanged");
+            }
+        }
+    }
+    // Without the light, nothing moves (and nothing is copied).
+    let mut plain = rgb.clone();
+    plain.data.iter_mut().for_each(|v| *v = v.min(0.95));
+    assert!(lights_at_farthest_depth(&plain, &before).is_none());
+}
+
+#[test]
+fn a_large_clipped_area_keeps_its_depth_map() {
+    // A 40 x 40 overexposed wall (1600 px, more than 16 point areas of 16 px) across a
+    // depth edge: not a light, nothing moves.
+    let (w, h) = (40, 40);
+    let mut rgb = Image::<f64>::new(w, h, 3);
+    rgb.data.iter_mut().for_each(|v| *v = 1.0);
+    let mut map = Image::<f64>::new(w, h, 1);
+    for (i, d) in map.data.iter_mut().enumerate() {
+        *d = if i % w < 10 { 0.8 } else { 0.0 };
+    }
+    assert!(lights_at_farthest_depth(&rgb, &map).is_none());
+}

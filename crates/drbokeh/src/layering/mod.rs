@@ -379,6 +379,12 @@ pub fn layers_from_disparity<T: Real>(
     check_inputs(rgb_encoded, disparity, None)?;
     let (w, h) = (rgb_encoded.width, rgb_encoded.height);
     let n = w * h;
+    // A clipped light seen past a nearer object's edge (between strands, through a fence)
+    // is one source at one depth: its mixed edge pixels are cut with the light, not with
+    // the nearer object (docs/layering.md). A single-layer result keeps the map as given.
+    let lights = crate::highlight::lights_at_farthest_depth(rgb_encoded, disparity);
+    let given = disparity;
+    let disparity = lights.as_ref().unwrap_or(given);
     let disp32: Vec<f32> = disparity.data.iter().map(|v| v.f64() as f32).collect();
     let (lo, hi) = disp32
         .iter()
@@ -413,7 +419,7 @@ pub fn layers_from_disparity<T: Real>(
             )
         };
         return Ok(Decomposition {
-            stack: LayerStack::single(rgb_encoded.clone(), disparity.clone())?,
+            stack: LayerStack::single(rgb_encoded.clone(), given.clone())?,
             thresholds: vec![],
             notes: vec![format!("{why}: using a single opaque layer")],
         });
@@ -541,7 +547,15 @@ fn build_layer<T: Real>(
         }
         // Feathered outward only: the layer's own pixels stay opaque (an in-focus render
         // reproduces the image), the pixels just beyond its cut edges get partial alpha.
-        let soft = box_blur(&hard, w, h, opts.feather_px);
+        let mut soft = box_blur(&hard, w, h, opts.feather_px);
+        // A clipped pixel beyond the cut edge is a light of the farther surface, not a mix
+        // of the two: feathered into this layer, its light would spread with this layer's
+        // blur (a ring around a light seen sharp between strands or through a fence).
+        for (i, a) in soft.iter_mut().enumerate() {
+            if hard[i] == 0.0 && is_clipped(rgb, i) {
+                *a = 0.0;
+            }
+        }
         Image::from_vec(
             w,
             h,
@@ -558,6 +572,14 @@ fn build_layer<T: Real>(
         alpha,
         disparity: disp,
     }
+}
+
+/// Whether pixel `i` of a display-encoded image has a clipped channel
+/// ([`crate::highlight::CLIPPED_LEVEL`]; recovered highlights lie above it).
+fn is_clipped<T: Real>(rgb: &Image<T>, i: usize) -> bool {
+    rgb.data[3 * i..3 * i + 3]
+        .iter()
+        .any(|v| v.f64() >= crate::highlight::CLIPPED_LEVEL)
 }
 
 /// Below this squared distance between the two colour models (encoded RGB), the alpha
