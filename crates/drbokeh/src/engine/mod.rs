@@ -23,6 +23,7 @@ mod reference;
 mod schedule;
 pub mod simd;
 mod spans;
+mod summed_area;
 mod tape;
 mod threaded;
 

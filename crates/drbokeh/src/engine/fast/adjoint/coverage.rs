@@ -7,6 +7,7 @@ use crate::engine::backward::fold_padded;
 use crate::engine::fast::runs::{for_each_lane, lane_sum, LANES};
 use crate::engine::fast::tiles::{backward_reach, ROW_BLOCK, TILE, TILE_ROWS};
 use crate::engine::simd::avx2_dispatch;
+use crate::engine::summed_area::fill_summed_area;
 use crate::model::{self, ApertureEval, ScatterStep};
 use crate::Real;
 use rayon::prelude::*;
@@ -37,27 +38,15 @@ pub(super) fn pass_coverage_box<T: Real>(ctx: &Ctx<'_, T>) -> Vec<T> {
     let mut sat = vec![0.0f64; (h + 1) * s1];
     for &hs in &sizes {
         let n = ((2 * hs + 1) * (2 * hs + 1)) as f64;
-        // SAT over the image receivers of share(x) where h(x) == hs: row prefix sums in
-        // parallel, then each row adds the one above (the same sums as row by row).
-        sat[s1..]
-            .par_chunks_mut(s1)
-            .enumerate()
-            .for_each(|(y, row)| {
-                let mut run = 0.0;
-                for x in 0..w {
-                    let i = y * w + x;
-                    if half[i] == hs {
-                        run += rcv.g_coverage[i].f64() / n;
-                    }
-                    row[x + 1] = run;
-                }
-            });
-        for y in 1..h {
-            let (above, row) = sat.split_at_mut((y + 1) * s1);
-            for (v, &a) in row[..s1].iter_mut().zip(&above[y * s1..]) {
-                *v += a;
+        // SAT over the image receivers of share(x) where h(x) == hs.
+        fill_summed_area(&mut sat, w, h, |x, y| {
+            let i = y * w + x;
+            if half[i] == hs {
+                rcv.g_coverage[i].f64() / n
+            } else {
+                0.0
             }
-        }
+        });
         let hs = hs as isize;
         padded
             .par_chunks_mut(stride)

@@ -32,6 +32,7 @@ use crate::engine::fast::adjoint::{
     gather_source_terms, Ctx, Receivers, SourceGradients, SourceTerms,
 };
 use crate::engine::simd::avx2_dispatch;
+use crate::engine::summed_area::fill_summed_area;
 use crate::model::{self, SCATTER_TAIL_PX};
 use crate::Real;
 use rayon::prelude::*;
@@ -181,22 +182,8 @@ impl Area {
     /// The summed-area count of `member` (one flag per pixel of a `w x h` image): row
     /// prefix counts in parallel, then the rows accumulated downwards.
     fn new(w: usize, h: usize, member: &[bool]) -> Self {
-        let s1 = w + 1;
-        let mut count = vec![0u32; (h + 1) * s1];
-        count[s1..]
-            .par_chunks_mut(s1)
-            .zip(member.par_chunks(w))
-            .for_each(|(out, row)| {
-                for (x, &inside) in row.iter().enumerate() {
-                    out[x + 1] = out[x] + u32::from(inside);
-                }
-            });
-        for y in 1..h {
-            let (above, row) = count.split_at_mut((y + 1) * s1);
-            for (c, &a) in row[..s1].iter_mut().zip(&above[y * s1..]) {
-                *c += a;
-            }
-        }
+        let mut count = vec![0u32; (h + 1) * (w + 1)];
+        fill_summed_area(&mut count, w, h, |x, y| u32::from(member[y * w + x]));
         Area {
             width: w,
             height: h,
