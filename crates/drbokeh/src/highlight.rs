@@ -585,6 +585,23 @@ pub fn regions(w: usize, h: usize, inside: impl Fn(usize) -> bool) -> Vec<Vec<us
     out
 }
 
+/// Each pixel's largest channel (display-encoded), the value the regions are cut by.
+pub(crate) fn largest_channel<T: Real>(rgb_encoded: &Image<T>) -> Vec<f64> {
+    rgb_encoded
+        .data
+        .chunks_exact(3)
+        .map(|p| p.iter().map(|v| v.f64()).fold(f64::NEG_INFINITY, f64::max))
+        .collect()
+}
+
+/// The [`regions`] of pixels whose `value` is at least `t0` that hold a clipped pixel
+/// ([`CLIPPED_LEVEL`]): the lights and speculars that lost light.
+pub(crate) fn clipped_regions(w: usize, h: usize, value: &[f64], t0: f64) -> Vec<Vec<usize>> {
+    let mut out = regions(w, h, |i| value[i] >= t0);
+    out.retain(|region| region.iter().any(|&i| value[i] >= CLIPPED_LEVEL));
+    out
+}
+
 /// Finds the clipped regions of `rgb_encoded` (threshold `t0`) and scales each pixel's
 /// linear colour by `g` (tint `None`) or towards `g tint` (per channel, never below the
 /// photo's), with `(g, tint)` from `gain_of(region, value)`, ramped by `s(t)` and the
@@ -602,15 +619,8 @@ fn recover_regions<T: Real>(
     mut gain_of: impl FnMut(&[usize], &[f64]) -> (f64, Option<[f64; 3]>),
 ) {
     let (w, h) = (rgb_encoded.width, rgb_encoded.height);
-    let value: Vec<f64> = rgb_encoded
-        .data
-        .chunks_exact(3)
-        .map(|p| p.iter().map(|v| v.f64()).fold(f64::NEG_INFINITY, f64::max))
-        .collect();
-    for region in regions(w, h, |i| value[i] >= t0) {
-        if !region.iter().any(|&i| value[i] >= CLIPPED_LEVEL) {
-            continue;
-        }
+    let value = largest_channel(rgb_encoded);
+    for region in clipped_regions(w, h, &value, t0) {
         let (g_region, tint) = gain_of(&region, &value);
         let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
         let radius_of = |j: usize| blur_k * (disparity.data[j].f64() - focus_disparity).abs();

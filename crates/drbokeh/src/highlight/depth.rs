@@ -9,7 +9,7 @@
 //! farthest its pixels show, when enough of them show it (a specular on a near object
 //! whose anti-aliased rim touches a few background pixels stays on the near object).
 
-use super::{regions, CLIPPED_LEVEL};
+use super::{clipped_regions, largest_channel};
 use crate::image::Image;
 use crate::Real;
 
@@ -36,11 +36,7 @@ pub fn lights_at_farthest_depth<T: Real>(
     disparity: &Image<T>,
 ) -> Option<Image<T>> {
     let (w, h) = (rgb_encoded.width, rgb_encoded.height);
-    let value: Vec<f64> = rgb_encoded
-        .data
-        .chunks_exact(3)
-        .map(|p| p.iter().map(|v| v.f64()).fold(f64::MIN, f64::max))
-        .collect();
+    let value = largest_channel(rgb_encoded);
     let (lo, hi) = disparity
         .data
         .iter()
@@ -50,8 +46,8 @@ pub fn lights_at_farthest_depth<T: Real>(
     let same = SAME_DEPTH_FRACTION * (hi - lo).max(0.0);
     let max_area = MAX_LIGHT_POINT_AREAS * super::point_area_px(w, h);
     let mut out: Option<Image<T>> = None;
-    for region in regions(w, h, |i| value[i] >= LIGHT_REGION_LEVEL) {
-        if region.len() as f64 > max_area || !region.iter().any(|&i| value[i] >= CLIPPED_LEVEL) {
+    for region in clipped_regions(w, h, &value, LIGHT_REGION_LEVEL) {
+        if region.len() as f64 > max_area {
             continue;
         }
         let farthest = region
