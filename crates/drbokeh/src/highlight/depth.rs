@@ -28,9 +28,11 @@ pub const MAX_LIGHT_POINT_AREAS: f64 = 16.0;
 
 /// The disparity map with each clipped light region of `rgb_encoded` (bright pixels,
 /// largest channel `>= LIGHT_REGION_LEVEL`, 8-connected, with at least one clipped pixel,
-/// at most [`MAX_LIGHT_POINT_AREAS`] point areas) moved to the farthest disparity among its pixels, where at least
-/// [`MIN_FARTHEST_SHARE`] of them lie at that depth (within [`SAME_DEPTH_FRACTION`] of the
-/// map's range); `None` where no pixel moves. Shapes must agree (the caller checked them).
+/// at most [`MAX_LIGHT_POINT_AREAS`] point areas) moved to the farthest disparity among
+/// its pixels, where at least [`MIN_FARTHEST_SHARE`] of them lie at that depth (within
+/// [`SAME_DEPTH_FRACTION`] of the map's range); `None` where no pixel moves (or where
+/// every pixel of each light already lies at its farthest depth, so a second pass over
+/// its own output changes nothing). Shapes must agree (the caller checked them).
 pub fn lights_at_farthest_depth<T: Real>(
     rgb_encoded: &Image<T>,
     disparity: &Image<T>,
