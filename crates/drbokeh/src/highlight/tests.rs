@@ -25,6 +25,16 @@ fn tone() -> Tone {
     Tone::new(Transfer::Gamma, 2.2, 0.0)
 }
 
+/// Sets every channel of the pixels in columns `x0..x1`, rows `y0..y1` of `img` to `v`.
+fn fill_rect(img: &mut Image<f64>, (x0, x1): (usize, usize), (y0, y1): (usize, usize), v: f64) {
+    let w = img.width;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            img.data[3 * (y * w + x)..3 * (y * w + x) + 3].fill(v);
+        }
+    }
+}
+
 #[test]
 fn parse_and_validate() {
     assert_eq!(PhotoHighlights::parse("off").unwrap(), PhotoHighlights::Off);
@@ -54,18 +64,9 @@ fn small_clipped_blob_gets_gain_large_area_less_unclipped_none() {
     // 40x40 grey image; a 2x2 clipped blob, a 20x10 clipped area, a bright unclipped blob.
     let mut img = Image::<f64>::new(40, 40, 3);
     img.data.iter_mut().for_each(|v| *v = 0.3);
-    let set = |img: &mut Image<f64>, x0: usize, y0: usize, x1: usize, y1: usize, v: f64| {
-        for y in y0..y1 {
-            for x in x0..x1 {
-                for c in 0..3 {
-                    img.data[3 * (y * 40 + x) + c] = v;
-                }
-            }
-        }
-    };
-    set(&mut img, 2, 2, 4, 4, 1.0);
-    set(&mut img, 10, 20, 30, 30, 1.0);
-    set(&mut img, 30, 2, 32, 4, 0.95);
+    fill_rect(&mut img, (2, 4), (2, 4), 1.0);
+    fill_rect(&mut img, (10, 30), (20, 30), 1.0);
+    fill_rect(&mut img, (30, 32), (2, 4), 0.95);
     let r = HighlightRecovery {
         gain: 5.0,
         threshold: 0.85,
@@ -78,7 +79,7 @@ fn small_clipped_blob_gets_gain_large_area_less_unclipped_none() {
             disp.data[y * 40 + x] = 0.0;
         }
     }
-    set(&mut img, 37, 30, 39, 32, 1.0);
+    fill_rect(&mut img, (37, 39), (30, 32), 1.0);
     let out = r.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
     let lin = |img: &Image<f64>, x: usize, y: usize| tone().linearize(img.data[3 * (y * 40 + x)]);
     assert!((lin(&out, 2, 2) - 5.0).abs() < 1e-9, "{}", lin(&out, 2, 2));
@@ -417,22 +418,13 @@ fn a_light_across_a_depth_edge_moves_to_the_farthest_depth_a_near_specular_stays
             map.data[y * w + x] = if near { 0.8 } else { 0.0 };
         }
     }
-    let mut paint = |x0: usize, x1: usize, y0: usize, y1: usize, v: f64| {
-        for y in y0..y1 {
-            for x in x0..x1 {
-                for c in 0..3 {
-                    rgb.data[(y * w + x) * 3 + c] = v;
-                }
-            }
-        }
-    };
     // A clipped light seen across the band (6 of its 12 pixels on the band's depth)...
-    paint(6, 12, 4, 6, 1.0);
+    fill_rect(&mut rgb, (6, 12), (4, 6), 1.0);
     // ...a clipped specular on the near square whose rim touches one far pixel...
-    paint(17, 22, 3, 6, 1.0);
-    paint(22, 23, 4, 5, 0.95);
+    fill_rect(&mut rgb, (17, 22), (3, 6), 1.0);
+    fill_rect(&mut rgb, (22, 23), (4, 5), 0.95);
     // ...and a bright but unclipped patch across the band (nothing was lost there).
-    paint(7, 11, 9, 11, 0.95);
+    fill_rect(&mut rgb, (7, 11), (9, 11), 0.95);
     let before = map;
     let disp = lights_at_farthest_depth(&rgb, &before).expect("the light moves");
     for y in 0..h {
