@@ -6,7 +6,10 @@
 //! ```
 //! `PRESET` is `physical` or `paper`; each `SPEC` is `off`, `paper` (the paper's boost) or
 //! `GAIN:THRESHOLD`, optionally followed by `+paper` (with the paper's boost as well) and `/single` (one opaque layer instead of the
-//! decomposition).
+//! decomposition). Oracles (from `aif.exr`, the unclipped all-in-focus image): `exr` (it
+//! as the photo), `oracle:px|tint|white[+gate]` (its clipped pixels or regions put back
+//! into the photo), `ogain[tint][-np]` (the default estimate with each region's gain, and
+//! with `tint` its tint, replaced by the true one; `-np` without the paper's boost).
 //!
 //! `SWEEP_SCENES=1` also prints each scene's PSNR; `SWEEP_DUMP=DIR` writes, per scene,
 //! `DIR/<benchmark>/<scene>/<spec>.npy` (display-encoded renders, float32) next to
@@ -73,8 +76,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 save("truth", &scene.ground_truth)?;
                 let aif: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
                 save("aif", &aif)?;
+                let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
+                save("exr", &exr)?;
             }
             for spec in &specs {
+                if let Some(mode) = spec.strip_prefix("ogain") {
+                    let out = oracle_gain(mode, &dir, &scene, preset)?;
+                    push(spec, psnr(&out, &scene.ground_truth)?);
+                    save(spec, &out)?;
+                    continue;
+                }
                 if let Some(mode) = spec.strip_prefix("oracle:") {
                     let out = oracle(mode, &dir, &scene, preset)?;
                     push(spec, psnr(&out, &scene.ground_truth)?);
@@ -196,6 +207,117 @@ fn oracle(
         disparity: scene.disparity.clone(),
         matte: None,
         layering: Layering::Decompose { max_layers: 5 },
+    };
+    let mut img = render_photo_pipeline(preset, Source::Photo(photo), &cam, view)?;
+    img.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    Ok(img)
+}
+
+/// Analysis only: the default estimate ([`drbokeh::highlight::HighlightEstimate`]) with
+/// each region's gain replaced by the true one, the gain `g` for which its profile
+/// (interior clipped pixels `g`, edge ones `g^p`) holds the clipped pixels' true light
+/// (largest channel, from `aif.exr`); with `tint` in `mode` the tint too (the true mean
+/// colour over its largest channel); `-np`: without the paper's boost on top.
+fn oracle_gain(
+    mode: &str,
+    dir: &std::path::Path,
+    scene: &SceneInputs,
+    preset: drbokeh::Preset,
+) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
+    let png: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
+    let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
+    let cam = scene.camera();
+    let (mode, paper) = match mode.strip_suffix("-np") {
+        Some(m) => (m, false),
+        None => (mode, true),
+    };
+    let with_tint = mode == "tint";
+    let est = drbokeh::highlight::HighlightEstimate::DEFAULT;
+    let p = est.edge_power.unwrap_or(1.0);
+    let view = View {
+        // The recovery is done here; the boost (or nothing) is left to the pipeline.
+        photo_highlights: if paper {
+            PhotoHighlights::PaperBoost
+        } else {
+            PhotoHighlights::Off
+        },
+        gamma: cam.gamma,
+        preset,
+        ..View::default()
+    };
+    let (w, h) = (png.width, png.height);
+    // As the pipeline: lights at their farthest depth first (idempotent there).
+    let disparity = drbokeh::highlight::lights_at_farthest_depth(&png, &scene.disparity)
+        .unwrap_or_else(|| scene.disparity.clone());
+    let clipped = |i: usize| {
+        png.data[3 * i..3 * i + 3]
+            .iter()
+            .any(|&v| v as f64 >= drbokeh::highlight::CLIPPED_LEVEL)
+    };
+    let recovered = est.apply_with(
+        &png,
+        &disparity,
+        scene.focus,
+        scene.blur_k,
+        &view.tone(),
+        |region, g, tint| {
+            let set: std::collections::HashSet<usize> =
+                region.iter().copied().filter(|&i| clipped(i)).collect();
+            if set.is_empty() {
+                return (g, tint);
+            }
+            let (mut interior, mut edge, mut light) = (0.0, 0.0, 0.0);
+            let mut colour = [0.0f64; 3];
+            for &i in &set {
+                let (x, y) = (i % w, i / w);
+                let on_edge = x == 0
+                    || y == 0
+                    || x + 1 == w
+                    || y + 1 == h
+                    || [i - 1, i + 1, i - w, i + w]
+                        .iter()
+                        .any(|j| !set.contains(j));
+                if on_edge {
+                    edge += 1.0;
+                } else {
+                    interior += 1.0;
+                }
+                let v = &exr.data[3 * i..3 * i + 3];
+                light += v.iter().fold(0.0f64, |m, &c| m.max(c as f64));
+                for c in 0..3 {
+                    colour[c] += v[c].max(0.0) as f64;
+                }
+            }
+            // interior g + edge g^p = light, g >= 1 (bisection in log g).
+            let excess = |g: f64| interior * g + edge * g.powf(p) - light;
+            let (mut lo, mut hi) = (1.0f64, 1000.0f64);
+            if excess(lo) >= 0.0 {
+                hi = 1.0;
+            }
+            for _ in 0..60 {
+                let m = (lo * hi).sqrt();
+                if excess(m) > 0.0 {
+                    hi = m;
+                } else {
+                    lo = m;
+                }
+            }
+            let tint = if with_tint {
+                let m = colour.iter().fold(1e-12f64, |a, &b| a.max(b));
+                colour.map(|c| c / m)
+            } else {
+                tint
+            };
+            (hi, tint)
+        },
+    )?;
+    let photo = drbokeh::scene::Photo {
+        rgb_encoded: recovered,
+        disparity,
+        matte: None,
+        layering: Layering::Decompose {
+            max_layers: drbokeh::layering::DEFAULT_MAX_LAYERS,
+        },
     };
     let mut img = render_photo_pipeline(preset, Source::Photo(photo), &cam, view)?;
     img.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));

@@ -337,6 +337,28 @@ impl HighlightEstimate {
         blur_k: f64,
         tone: &Tone,
     ) -> Result<Image<T>> {
+        self.apply_with(
+            rgb_encoded,
+            disparity,
+            focus_disparity,
+            blur_k,
+            tone,
+            |_, g, t| (g, t),
+        )
+    }
+
+    /// For analysis (`examples/highlight_sweep.rs`, its `ogain` oracle): as
+    /// [`HighlightEstimate::apply`], with each region's estimated `(gain, tint)` replaced by
+    /// `adjust(region's pixel indices, gain, tint)`.
+    pub fn apply_with<T: Real>(
+        &self,
+        rgb_encoded: &Image<T>,
+        disparity: &Image<T>,
+        focus_disparity: f64,
+        blur_k: f64,
+        tone: &Tone,
+        mut adjust: impl FnMut(&[usize], f64, [f64; 3]) -> (f64, [f64; 3]),
+    ) -> Result<Image<T>> {
         self.validate()?;
         check_inputs(rgb_encoded, disparity)?;
         let mut out = rgb_encoded.clone();
@@ -368,6 +390,7 @@ impl HighlightEstimate {
             |region, value| {
                 stamp += 5;
                 let (g, tint) = est.estimate(region, value, &lin, w, h, &mut mark, stamp);
+                let (g, tint) = adjust(region, g, tint);
                 (g, Some(tint))
             },
         );
