@@ -295,6 +295,7 @@ pub fn flag_for(parameter: &str) -> Option<&'static str> {
         "focal_planes" => "--focal-planes",
         "highlight" => "--highlight",
         "highlight_range" => "--highlight-range",
+        "background_detail" => "--background-detail",
         "coarse_scales" => "--coarse-scales",
         "edge_sensitivity" => "--edge-sensitivity",
         "colour_bins" => "--colour-bins",

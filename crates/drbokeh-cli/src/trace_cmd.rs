@@ -121,6 +121,12 @@ pub struct MakeArgs {
     #[arg(long, value_name = "LO:HI")]
     pub highlight_range: Option<String>,
 
+    /// Fine detail on the background's surfaces, a strength in [0, 1] (default 0, none;
+    /// e.g. 0.5): the same scenes with a textured sky and panels, so that every part of
+    /// the background shows its blur (used for depth-from-defocus training data).
+    #[arg(long, default_value_t = 0.0, value_name = "STRENGTH")]
+    pub background_detail: f64,
+
     /// Make only the scenes with index % n == k.
     #[arg(long, value_name = "k/n")]
     pub shard: Option<String>,
@@ -270,7 +276,11 @@ fn run_make(a: &MakeArgs) -> Result<()> {
     // Every spec first: a bad parameter fails before anything is written.
     let specs = (0..a.scenes)
         .map(|i| {
-            benchmark::scene_spec_with_highlights(a.seed, i, a.scenes, a.size, a.spp, highlights)
+            let content = benchmark::Content {
+                highlights,
+                background_detail: a.background_detail,
+            };
+            benchmark::scene_spec_with_content(a.seed, i, a.scenes, a.size, a.spp, content)
         })
         .collect::<drbokeh::Result<Vec<_>>>()?;
     for s in &specs {
@@ -298,6 +308,7 @@ fn run_make(a: &MakeArgs) -> Result<()> {
         "size": a.size,
         "spp": a.spp,
         "highlight_range": [highlights.lo, highlights.hi],
+        "background_detail": a.background_detail,
         "lens": {
             "model": "spherical",
             "curvature_radius_mm": benchmark::CURVATURE_RADIUS_MM,

@@ -159,6 +159,8 @@ fn bad_input_fails_with_a_clear_message_and_no_output() {
     assert_fails_cleanly(&near_sensor, "must exceed the focal length");
     let odd_spp = tiny_scene(LENS, "").replace("\"spp\": 16", "\"spp\": 15");
     assert_fails_cleanly(&odd_spp, "perfect square");
+    let bad_detail = r#"{ "depth_mm": 120.0, "size": [0.3, 0.3], "texture": { "type": "procedural", "kind": "background", "seed": 1, "background_detail": 2.0 } },"#;
+    assert_fails_cleanly(&tiny_scene(LENS, bad_detail), "background_detail");
 }
 
 fn tree_bytes(dir: &Path) -> Vec<(String, Vec<u8>)> {

@@ -329,6 +329,27 @@ def test_quick_data_is_far_focus_only(quick_run):
         assert np.all(np.abs(per_scene_min) < 1e-6), name
 
 
+def test_background_detail_reaches_the_traced_scenes_and_the_cache_record(tmp_path):
+    """``--background-detail`` is passed to ``drbokeh benchmark make`` (recorded in the
+    background billboard's spec and the manifest), and a data cache made with another
+    detail is refused."""
+    from drbokeh.dfdnet.data import SplitSpec, make_benchmark, prepare
+
+    spec = SplitSpec("train", 1711, 1, 32, 4, "far", 0.5)
+    make_benchmark(spec, tmp_path / "b", str(_find_cli()))
+    manifest = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert manifest["background_detail"] == 0.5
+    scenes = sorted(p for p in (tmp_path / "b").iterdir() if p.is_dir())
+    assert scenes, "no scene made"
+    billboards = json.loads((scenes[0] / "scene.json").read_text())["billboards"]
+    details = {b["name"]: b["texture"].get("background_detail") for b in billboards}
+    assert details.pop("background") == 0.5 and set(details.values()) == {None}, details
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / "splits.json").write_text(json.dumps([SplitSpec("train", 1711, 1, 32, 4, "far").__dict__]))
+    with pytest.raises(ValueError, match="other splits"):
+        prepare(tmp_path / "cache", [spec], cli=str(_find_cli()))
+
+
 def test_textured_mask_is_the_local_luminance_std():
     from drbokeh.dfdnet.evaluate import textured_mask
 

@@ -66,7 +66,55 @@ pub fn scene_spec_with_highlights(
     spp: usize,
     highlights: HighlightRange,
 ) -> Result<SceneSpec> {
+    scene_spec_with_content(
+        seed,
+        index,
+        count,
+        size,
+        spp,
+        Content {
+            highlights,
+            ..Content::default()
+        },
+    )
+}
+
+/// What a benchmark's scenes show beyond their layout: the highlights' range and the
+/// background's fine detail. Neither changes the geometry, focus, blur or random draws.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Content {
+    /// Range of the highlights' linear gains.
+    pub highlights: HighlightRange,
+    /// Strength in [0, 1] of the fine detail on the background
+    /// ([`super::procedural::generate_with`]); 0, the default, for none.
+    pub background_detail: f64,
+}
+
+impl Default for Content {
+    fn default() -> Self {
+        Content {
+            highlights: HighlightRange::default(),
+            background_detail: 0.0,
+        }
+    }
+}
+
+/// [`scene_spec`] with `content`'s highlights and background detail; the defaults are not
+/// written into the spec, so standard scenes keep their `scene.json`.
+pub fn scene_spec_with_content(
+    seed: u64,
+    index: usize,
+    count: usize,
+    size: usize,
+    spp: usize,
+    content: Content,
+) -> Result<SceneSpec> {
+    let Content {
+        highlights,
+        background_detail,
+    } = content;
     highlights.validate()?;
+    super::procedural::validate_background_detail(background_detail)?;
     let highlight_range = (highlights != HighlightRange::default()).then_some(highlights);
     let mut rng = Rng::from_words(&[seed, index as u64, 0xBE4C]);
     let lens_f =
@@ -151,6 +199,8 @@ pub fn scene_spec_with_highlights(
                 kind,
                 seed: rng.next_u64() >> 11,
                 highlight_range,
+                background_detail: (kind == ProceduralKind::Background && background_detail > 0.0)
+                    .then_some(background_detail),
             },
         });
     }
@@ -265,5 +315,71 @@ mod tests {
         assert!(HighlightRange::parse("50:5").is_err());
         assert!(HighlightRange::parse("0:5").is_err());
         assert!(HighlightRange::parse("x").is_err());
+    }
+
+    #[test]
+    fn background_detail_changes_only_the_background_texture() {
+        let std = scene_spec(5, 7, 20, 64, 16).unwrap();
+        let detail = |d: f64| {
+            scene_spec_with_content(
+                5,
+                7,
+                20,
+                64,
+                16,
+                Content {
+                    background_detail: d,
+                    ..Content::default()
+                },
+            )
+        };
+        assert_eq!(std, detail(0.0).unwrap());
+        let d = detail(0.5).unwrap();
+        d.validate().unwrap();
+        for (x, y) in std.billboards.iter().zip(&d.billboards) {
+            assert_eq!(
+                (x.depth_mm, x.center, x.size),
+                (y.depth_mm, y.center, y.size)
+            );
+            let want = (y.name == "background").then_some(0.5);
+            match &y.texture {
+                TextureSpec::Procedural {
+                    background_detail, ..
+                } => assert_eq!(*background_detail, want, "{}", y.name),
+                t => panic!("unexpected texture {t:?}"),
+            }
+        }
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let e = detail(bad).unwrap_err().to_string();
+            assert!(e.contains("background_detail"), "{e}");
+        }
+        // Detail adds fine variation (neighbour differences) to the same layout.
+        use super::super::procedural::{generate, generate_with};
+        let kind = ProceduralKind::Background;
+        let plain = generate(kind, 3, 128, 128);
+        assert_eq!(
+            plain.data,
+            generate_with(kind, 3, 128, 128, HighlightRange::default(), 0.0).data
+        );
+        let fine = generate_with(kind, 3, 128, 128, HighlightRange::default(), 1.0);
+        let roughness = |t: &super::super::texture::Texture| {
+            let mut sum = 0.0f64;
+            for y in 0..t.height {
+                for x in 1..t.width {
+                    let (a, b) = (t.data[y * t.width + x], t.data[y * t.width + x - 1]);
+                    // Below 1: the surfaces, not the highlights.
+                    if a[1] < 1.0 && b[1] < 1.0 {
+                        sum += (a[1] - b[1]).abs() as f64;
+                    }
+                }
+            }
+            sum
+        };
+        assert!(
+            roughness(&fine) > 2.0 * roughness(&plain),
+            "{} vs {}",
+            roughness(&fine),
+            roughness(&plain)
+        );
     }
 }

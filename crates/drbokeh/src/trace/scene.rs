@@ -168,6 +168,10 @@ pub enum TextureSpec {
         /// Range of the highlights' linear gains (default 2 to 10).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         highlight_range: Option<HighlightRange>,
+        /// Strength in [0, 1] of the fine detail on a background's surfaces (default none;
+        /// [`procedural::generate_with`]).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        background_detail: Option<f64>,
     },
 }
 
@@ -374,10 +378,17 @@ impl SceneSpec {
                     }
                 }
                 TextureSpec::Procedural {
-                    highlight_range: Some(r),
+                    highlight_range,
+                    background_detail,
                     ..
-                } => r.validate()?,
-                TextureSpec::Procedural { .. } => {}
+                } => {
+                    if let Some(r) = highlight_range {
+                        r.validate()?;
+                    }
+                    if let Some(d) = background_detail {
+                        procedural::validate_background_detail(*d)?;
+                    }
+                }
             }
         }
         Ok(())
@@ -452,12 +463,14 @@ impl SceneSpec {
                     kind,
                     seed,
                     highlight_range,
-                } => procedural::generate_with_highlights(
+                    background_detail,
+                } => procedural::generate_with(
                     *kind,
                     *seed,
                     tw,
                     th,
                     highlight_range.unwrap_or_default(),
+                    background_detail.unwrap_or(0.0),
                 ),
             };
             billboards.push(Billboard::place(

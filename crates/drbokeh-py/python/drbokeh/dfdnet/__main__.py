@@ -38,6 +38,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spp", type=int, default=144, help="samples per pixel of the traced images (default 144)")
     p.add_argument("--focus", choices=tuple(FOCUS), default="far",
                    help="far (default): scenes focused on the background, d >= 0; near: on the nearest billboard, d <= 0 (docs/dfdnet.md)")
+    p.add_argument("--background-detail", type=float, default=0.0, metavar="STRENGTH",
+                   help="fine detail on the scenes' backgrounds, in [0, 1] (default 0: none; drbokeh benchmark make --background-detail; docs/dfdnet.md)")
     p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
     p.add_argument("--val-scenes", type=int, default=32)
     p.add_argument("--test-scenes", type=int, default=64)
@@ -47,6 +49,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--crop", type=int, default=TrainConfig.crop, help="training crop side, a multiple of 16")
     p.add_argument("--base", type=int, default=TrainConfig.base, help=f"U-Net width (default {TrainConfig.base}: about 1.1 M parameters)")
     p.add_argument("--lr", type=float, default=TrainConfig.lr)
+    p.add_argument("--seed", type=int, default=TrainConfig.seed,
+                   help=f"initial weights and batch order (default {TrainConfig.seed}); every run of one command shares it")
     p.add_argument("--highlights", choices=HIGHLIGHTS, default=TrainConfig.highlights,
                    help=f"clipped highlights in the loss (default {TrainConfig.highlights}; docs/dfdnet.md)")
     p.add_argument("--init-disparity", type=float, default=TrainConfig.init_disparity,
@@ -57,13 +61,15 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _specs(a: argparse.Namespace) -> List[SplitSpec]:
-    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes, a.focus)
+    if not 0.0 <= a.background_detail <= 1.0:
+        raise SystemExit(f"--background-detail {a.background_detail}: must be in [0, 1]")
+    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes, a.focus, a.background_detail)
 
 
 def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
-    return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, threads=a.threads,
+    return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
                        highlights=a.highlights, init_disparity=a.init_disparity)
 
 
@@ -109,8 +115,9 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
 def _quick(a: argparse.Namespace) -> None:
     """Tiny data (64 px, far focus as the table), a few steps of drbokeh ``physical``."""
     size = QUICK_SIZE if a.size == SIZE else a.size
-    specs = [SplitSpec("train", 1711, 64, size, a.spp, a.focus), SplitSpec("val", 1712, 8, size, a.spp, a.focus),
-             SplitSpec("test", 1713, 24, size, a.spp, a.focus)]
+    specs = [SplitSpec("train", 1711, 64, size, a.spp, a.focus, a.background_detail),
+             SplitSpec("val", 1712, 8, size, a.spp, a.focus, a.background_detail),
+             SplitSpec("test", 1713, 24, size, a.spp, a.focus, a.background_detail)]
     cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=a.batch, crop=min(64, size), base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
                       init_disparity=a.init_disparity)

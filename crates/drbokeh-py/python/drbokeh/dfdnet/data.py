@@ -44,6 +44,7 @@ class SplitSpec:
     size: int
     spp: int
     focus: str = "far"
+    background_detail: float = 0.0
 
 
 @dataclass
@@ -69,14 +70,15 @@ FOCUS = {"far": (2, 0.0), "near": (0, 1.0)}  # focus -> (shard of 3, disparity i
 
 
 def default_splits(
-    size: int = 128, spp: int = 144, train: int = 240, val: int = 32, test: int = 64, focus: str = "far"
+    size: int = 128, spp: int = 144, train: int = 240, val: int = 32, test: int = 64, focus: str = "far",
+    background_detail: float = 0.0,
 ) -> List[SplitSpec]:
     if focus not in FOCUS:
         raise ValueError(f"unknown focus {focus!r} (available: {', '.join(FOCUS)})")
     return [
-        SplitSpec("train", 1701, train, size, spp, focus),
-        SplitSpec("val", 1702, val, size, spp, focus),
-        SplitSpec("test", 1703, test, size, spp, focus),
+        SplitSpec("train", 1701, train, size, spp, focus, background_detail),
+        SplitSpec("val", 1702, val, size, spp, focus, background_detail),
+        SplitSpec("test", 1703, test, size, spp, focus, background_detail),
     ]
 
 
@@ -104,6 +106,8 @@ def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1)
         "--seed", str(spec.seed), "--size", str(spec.size), "--spp", str(spec.spp),
         "--threads", str(threads), "--out", str(directory), "-q",
     ]
+    if spec.background_detail > 0:
+        cmd += ["--background-detail", str(spec.background_detail)]
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr.strip()}")
@@ -165,8 +169,8 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
     data_dir.mkdir(parents=True, exist_ok=True)
     record = data_dir / "splits.json"
     want = [s.__dict__ for s in specs]
-    # Caches from before the focus option are near focus.
-    if record.exists() and [{"focus": "near", **r} for r in json.loads(record.read_text())] != want:
+    # Caches from before the focus option are near focus; from before the detail option, without.
+    if record.exists() and [{"focus": "near", "background_detail": 0.0, **r} for r in json.loads(record.read_text())] != want:
         raise ValueError(f"{record} was made with other splits; use another --data directory")
     record.write_text(json.dumps(want, indent=1))
     out: Dict[str, Split] = {}
