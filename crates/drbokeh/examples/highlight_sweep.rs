@@ -156,8 +156,7 @@ fn oracle(
     scene: &SceneInputs,
     preset: drbokeh::Preset,
 ) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
-    let png: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
-    let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
+    let (png, exr) = read_png_exr(dir)?;
     let cam = scene.camera();
     let view = View {
         photo_highlights: PhotoHighlights::Off,
@@ -202,15 +201,7 @@ fn oracle(
             }
         }
     }
-    let photo = drbokeh::scene::Photo {
-        rgb_encoded: out,
-        disparity: scene.disparity.clone(),
-        matte: None,
-        layering: Layering::Decompose { max_layers: 5 },
-    };
-    let mut img = render_photo_pipeline(preset, Source::Photo(photo), &cam, view)?;
-    img.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
-    Ok(img)
+    render_decomposed(preset, out, scene.disparity.clone(), &cam, view)
 }
 
 /// Analysis only: the default estimate ([`drbokeh::highlight::HighlightEstimate`]) with
@@ -224,8 +215,7 @@ fn oracle_gain(
     scene: &SceneInputs,
     preset: drbokeh::Preset,
 ) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
-    let png: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
-    let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
+    let (png, exr) = read_png_exr(dir)?;
     let cam = scene.camera();
     let (mode, paper) = match mode.strip_suffix("-np") {
         Some(m) => (m, false),
@@ -311,17 +301,38 @@ fn oracle_gain(
             (hi, tint)
         },
     )?;
+    render_decomposed(preset, recovered, disparity, &cam, view)
+}
+
+/// The photo pipeline on a prepared photo (decomposed into the default number of layers),
+/// clipped to [0, 1] as `bokeh.png` is.
+fn render_decomposed(
+    preset: drbokeh::Preset,
+    rgb_encoded: drbokeh::image::Image<f32>,
+    disparity: drbokeh::image::Image<f32>,
+    cam: &drbokeh::camera::Camera,
+    view: View,
+) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
     let photo = drbokeh::scene::Photo {
-        rgb_encoded: recovered,
+        rgb_encoded,
         disparity,
         matte: None,
         layering: Layering::Decompose {
             max_layers: drbokeh::layering::DEFAULT_MAX_LAYERS,
         },
     };
-    let mut img = render_photo_pipeline(preset, Source::Photo(photo), &cam, view)?;
+    let mut img = render_photo_pipeline(preset, Source::Photo(photo), cam, view)?;
     img.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
     Ok(img)
+}
+
+/// `aif.png` and `aif.exr` of a scene (display-encoded and linear).
+type PngExr = (drbokeh::image::Image<f32>, drbokeh::image::Image<f32>);
+fn read_png_exr(dir: &std::path::Path) -> Result<PngExr, Box<dyn std::error::Error>> {
+    Ok((
+        drbokeh::io::read_rgb(&dir.join("aif.png"))?,
+        drbokeh::io::read_rgb(&dir.join("aif.exr"))?,
+    ))
 }
 
 fn mean(v: &[f64]) -> f64 {
