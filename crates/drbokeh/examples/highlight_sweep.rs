@@ -74,20 +74,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let gt = render_method(Method::PhysicalGt, &scene)?;
                 save("gt", &gt)?;
                 save("truth", &scene.ground_truth)?;
-                let aif: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
+                let (aif, exr) = read_png_exr(&dir)?;
                 save("aif", &aif)?;
-                let exr: drbokeh::image::Image<f32> = drbokeh::io::read_rgb(&dir.join("aif.exr"))?;
                 save("exr", &exr)?;
             }
             for spec in &specs {
-                if let Some(mode) = spec.strip_prefix("ogain") {
-                    let out = oracle_gain(mode, &dir, &scene, preset)?;
-                    push(spec, psnr(&out, &scene.ground_truth)?);
-                    save(spec, &out)?;
-                    continue;
-                }
-                if let Some(mode) = spec.strip_prefix("oracle:") {
-                    let out = oracle(mode, &dir, &scene, preset)?;
+                let oracle_out = if let Some(mode) = spec.strip_prefix("ogain") {
+                    Some(oracle_gain(mode, &dir, &scene, preset)?)
+                } else if let Some(mode) = spec.strip_prefix("oracle:") {
+                    Some(oracle(mode, &dir, &scene, preset)?)
+                } else {
+                    None
+                };
+                if let Some(out) = oracle_out {
                     push(spec, psnr(&out, &scene.ground_truth)?);
                     save(spec, &out)?;
                     continue;
@@ -251,22 +250,16 @@ fn oracle_gain(
         scene.blur_k,
         &view.tone(),
         |region, g, tint| {
-            let set: std::collections::HashSet<usize> =
-                region.iter().copied().filter(|&i| clipped(i)).collect();
-            if set.is_empty() {
-                return (g, tint);
-            }
             let (mut interior, mut edge, mut light) = (0.0, 0.0, 0.0);
             let mut colour = [0.0f64; 3];
-            for &i in &set {
+            // A clipped 4-neighbour of a region's pixel is in the same region.
+            for &i in region.iter().filter(|&&i| clipped(i)) {
                 let (x, y) = (i % w, i / w);
                 let on_edge = x == 0
                     || y == 0
                     || x + 1 == w
                     || y + 1 == h
-                    || [i - 1, i + 1, i - w, i + w]
-                        .iter()
-                        .any(|j| !set.contains(j));
+                    || [i - 1, i + 1, i - w, i + w].iter().any(|&j| !clipped(j));
                 if on_edge {
                     edge += 1.0;
                 } else {
@@ -277,6 +270,9 @@ fn oracle_gain(
                 for c in 0..3 {
                     colour[c] += v[c].max(0.0) as f64;
                 }
+            }
+            if interior + edge == 0.0 {
+                return (g, tint);
             }
             // interior g + edge g^p = light, g >= 1 (bisection in log g).
             let excess = |g: f64| interior * g + edge * g.powf(p) - light;

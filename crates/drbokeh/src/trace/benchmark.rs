@@ -51,32 +51,7 @@ pub fn scene_spec(
     size: usize,
     spp: usize,
 ) -> Result<SceneSpec> {
-    scene_spec_with_highlights(seed, index, count, size, spp, HighlightRange::default())
-}
-
-/// [`scene_spec`] with the highlights' linear gains drawn from `highlights`: the same
-/// geometry, focus, blur and content for every range (only the highlights' brightness
-/// changes). The default range is not written into the spec, so standard scenes keep
-/// their `scene.json`.
-pub fn scene_spec_with_highlights(
-    seed: u64,
-    index: usize,
-    count: usize,
-    size: usize,
-    spp: usize,
-    highlights: HighlightRange,
-) -> Result<SceneSpec> {
-    scene_spec_with_content(
-        seed,
-        index,
-        count,
-        size,
-        spp,
-        Content {
-            highlights,
-            ..Content::default()
-        },
-    )
+    scene_spec_with_content(seed, index, count, size, spp, Content::default())
 }
 
 /// What a benchmark's scenes show beyond their layout: the highlights' range and the
@@ -99,8 +74,10 @@ impl Default for Content {
     }
 }
 
-/// [`scene_spec`] with `content`'s highlights and background detail; the defaults are not
-/// written into the spec, so standard scenes keep their `scene.json`.
+/// [`scene_spec`] with `content`'s highlights and background detail: the same geometry,
+/// focus, blur and random draws for every content (only the highlights' brightness and
+/// the background's detail change). The defaults are not written into the spec, so
+/// standard scenes keep their `scene.json`.
 pub fn scene_spec_with_content(
     seed: u64,
     index: usize,
@@ -282,10 +259,16 @@ mod tests {
     #[test]
     fn highlight_range_changes_only_the_highlights() {
         let std = scene_spec(5, 7, 20, 64, 16).unwrap();
-        let dflt = scene_spec_with_highlights(5, 7, 20, 64, 16, HighlightRange::default()).unwrap();
-        assert_eq!(std, dflt);
+        let with = |highlights| {
+            let content = Content {
+                highlights,
+                ..Content::default()
+            };
+            scene_spec_with_content(5, 7, 20, 64, 16, content).unwrap()
+        };
+        assert_eq!(std, with(HighlightRange::default()));
         let bright = HighlightRange { lo: 5.0, hi: 50.0 };
-        let b = scene_spec_with_highlights(5, 7, 20, 64, 16, bright).unwrap();
+        let b = with(bright);
         assert_ne!(std, b);
         for (x, y) in std.billboards.iter().zip(&b.billboards) {
             assert_eq!(
