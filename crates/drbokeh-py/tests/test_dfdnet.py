@@ -162,6 +162,23 @@ def test_run_names_round_trip():
         parse_run("physical-hssim-bright")
 
 
+def test_focus_prior_adds_its_weighted_term_to_the_image_loss():
+    from drbokeh.dfdnet.train import TrainConfig, image_loss
+
+    rng = np.random.default_rng(5)
+    b = {"aif": rng.uniform(0.1, 0.9, (2, 3, 48, 48)).astype(np.float32),
+         "bokeh": rng.uniform(0.1, 0.9, (2, 3, 48, 48)).astype(np.float32),
+         "focus": np.array([0.0, 0.25], np.float32), "blur": np.array([2.0, 3.0], np.float32)}
+    pred = torch.from_numpy(rng.uniform(0.0, 1.0, (2, 1, 48, 48)).astype(np.float32))
+    layer = layers.make_layer("gausspsf")
+    base, terms = image_loss(layer, "hssim", TrainConfig(), b, pred)
+    assert "focus" not in terms
+    with_prior, terms = image_loss(layer, "hssim", TrainConfig(w_focus=1.5), b, pred)
+    expected = np.abs(pred.numpy() - b["focus"].reshape(-1, 1, 1, 1)).mean()
+    assert terms["focus"] == pytest.approx(expected, rel=1e-5)
+    assert float(with_prior) == pytest.approx(float(base) + 1.5 * expected, rel=1e-5)
+
+
 # ---- layers: NumPy transcriptions of crates/drbokeh/src/baselines ---------------------------
 
 

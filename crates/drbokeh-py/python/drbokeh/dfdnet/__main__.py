@@ -55,6 +55,8 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help=f"clipped highlights in the loss (default {TrainConfig.highlights}; docs/dfdnet.md)")
     p.add_argument("--init-disparity", type=float, default=TrainConfig.init_disparity,
                    help="initial disparity output (the head's bias; default: PyTorch's initialisation, about 0.5)")
+    p.add_argument("--focus-prior", type=float, default=TrainConfig.w_focus, metavar="WEIGHT",
+                   help="weight of a prior for the least defocus: WEIGHT x mean |disparity - focus| (default 0: off; docs/dfdnet.md)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
     p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised); default: the table: "
                    + ",".join(r.name for r in TABLE_RUNS))
@@ -70,7 +72,7 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
-                       highlights=a.highlights, init_disparity=a.init_disparity)
+                       highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior)
 
 
 def _runs(a: argparse.Namespace) -> List[RunSpec]:
@@ -120,7 +122,7 @@ def _quick(a: argparse.Namespace) -> None:
              SplitSpec("test", 1713, 24, size, a.spp, a.focus, a.background_detail)]
     cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=a.batch, crop=min(64, size), base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
-                      init_disparity=a.init_disparity)
+                      init_disparity=a.init_disparity, w_focus=a.focus_prior)
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")

@@ -99,6 +99,8 @@ class TrainConfig:
     # Initial value of the disparity output (the head's bias; None: PyTorch's default
     # initialisation, about 0.5).
     init_disparity: Optional[float] = None
+    # Weight of the focus prior: mean |disparity - focus| of the prediction (0: off).
+    w_focus: float = 0.0
 
 
 def new_model(cfg: TrainConfig) -> UNet:
@@ -160,11 +162,17 @@ def image_loss(
     if "reach" in b:
         structure_mask = torch.from_numpy(b["reach"])[inner]
         unclipped = unclipped * structure_mask
-    return defocus_loss(
+    total, terms = defocus_loss(
         r_in, t_in, pred, aif, loss_name, w_l1=cfg.w_l1, w_smooth=cfg.w_smooth,
         w_structure=cfg.w_structure, edge_sensitivity=cfg.edge_sensitivity, mask=unclipped,
         structure_mask=structure_mask,
     )
+    if cfg.w_focus > 0.0:
+        focus = torch.from_numpy(b["focus"]).to(pred.dtype).view(-1, 1, 1, 1)
+        t_f = (pred - focus).abs().mean()
+        total = total + cfg.w_focus * t_f
+        terms["focus"] = float(t_f.detach())
+    return total, terms
 
 
 def train_run(
