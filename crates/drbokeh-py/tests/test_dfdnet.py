@@ -162,6 +162,28 @@ def test_run_names_round_trip():
         parse_run("physical-hssim-bright")
 
 
+def test_unset_options_take_the_table_protocol_or_quick_settings():
+    """The table's defaults (session 11's protocol: whole images, batch 2, 1500 steps,
+    the far start, textured backgrounds); --quick keeps its own small settings; what the
+    user gives wins; --init-disparity takes a disparity in (0, 1) or 'pytorch'."""
+    from drbokeh.dfdnet.__main__ import _cfg, parse_args
+
+    a = parse_args(["reproduce", "--out", "o"])
+    cfg = _cfg(a)
+    assert (cfg.steps, cfg.batch, cfg.crop, cfg.init_disparity) == (1500, 2, 128, 0.05)
+    assert (a.size, a.background_detail) == (128, 1.0)
+    q = parse_args(["train", "--quick", "--out", "o"])
+    assert (q.size, q.steps, q.batch, q.crop, q.init_disparity, q.background_detail) == (64, 40, 4, 64, None, 0.0)
+    b = parse_args(["train", "--out", "o", "--size", "192", "--crop", "96", "--init-disparity", "pytorch",
+                    "--background-detail", "0"])
+    cfg = _cfg(b)
+    assert (cfg.crop, cfg.init_disparity, b.background_detail) == (96, None, 0.0)
+    assert parse_args(["eval", "--out", "o", "--size", "192"]).crop == 192
+    for bad in ("1.5", "0", "far"):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", "--init-disparity", bad])
+
+
 def test_focus_prior_adds_its_weighted_term_to_the_image_loss():
     from drbokeh.dfdnet.train import TrainConfig, image_loss
 

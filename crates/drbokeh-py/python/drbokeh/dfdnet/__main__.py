@@ -28,6 +28,34 @@ from .train import HIGHLIGHTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, exi
 _log = log_line
 SIZE = 128
 QUICK_SIZE = 64
+# The table's data: fine detail on the backgrounds (session 10), so that every part of the
+# background shows its blur.
+BACKGROUND_DETAIL = 1.0
+# --quick's own settings (tiny data, a few steps; the Python test suite's check).
+QUICK = {"steps": 40, "batch": 4, "crop": 64, "background_detail": 0.0, "init_disparity": "pytorch"}
+
+
+def _init_arg(text: str) -> object:
+    if text.strip().lower() == "pytorch":
+        return "pytorch"
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a disparity in (0, 1) or 'pytorch'") from None
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a disparity in (0, 1) or 'pytorch'")
+    return v
+
+
+def _resolve(a: argparse.Namespace, quick: bool) -> None:
+    """Fills the options left unset with the table's values, or --quick's."""
+    table = {"steps": TrainConfig.steps, "batch": TrainConfig.batch, "crop": a.size,
+             "background_detail": BACKGROUND_DETAIL, "init_disparity": TrainConfig.init_disparity}
+    for key, value in (QUICK if quick else table).items():
+        if getattr(a, key) is None:
+            setattr(a, key, min(value, a.size) if quick and key == "crop" else value)
+    if a.init_disparity == "pytorch":
+        a.init_disparity = None
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -38,23 +66,28 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spp", type=int, default=144, help="samples per pixel of the traced images (default 144)")
     p.add_argument("--focus", choices=tuple(FOCUS), default="far",
                    help="far (default): scenes focused on the background, d >= 0; near: on the nearest billboard, d <= 0 (docs/dfdnet.md)")
-    p.add_argument("--background-detail", type=float, default=0.0, metavar="STRENGTH",
-                   help="fine detail on the scenes' backgrounds, in [0, 1] (default 0: none; drbokeh benchmark make --background-detail; docs/dfdnet.md)")
+    p.add_argument("--background-detail", type=float, default=None, metavar="STRENGTH",
+                   help=f"fine detail on the scenes' backgrounds, in [0, 1] (default {BACKGROUND_DETAIL}; 0 with --quick; "
+                        "drbokeh benchmark make --background-detail; docs/dfdnet.md)")
     p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
     p.add_argument("--val-scenes", type=int, default=32)
     p.add_argument("--test-scenes", type=int, default=64)
     p.add_argument("--threads", type=int, default=1, help="torch and renderer threads (default 1: on a shared machine two processes of one thread beat one of two)")
-    p.add_argument("--steps", type=int, default=TrainConfig.steps, help=f"training steps per run (default {TrainConfig.steps})")
-    p.add_argument("--batch", type=int, default=TrainConfig.batch)
-    p.add_argument("--crop", type=int, default=TrainConfig.crop, help="training crop side, a multiple of 16")
+    p.add_argument("--steps", type=int, default=None,
+                   help=f"training steps per run (default {TrainConfig.steps}; {QUICK['steps']} with --quick)")
+    p.add_argument("--batch", type=int, default=None,
+                   help=f"images per step (default {TrainConfig.batch}; {QUICK['batch']} with --quick)")
+    p.add_argument("--crop", type=int, default=None,
+                   help=f"training crop side, a multiple of 16 (default: the whole scene, --size; {QUICK['crop']} with --quick)")
     p.add_argument("--base", type=int, default=TrainConfig.base, help=f"U-Net width (default {TrainConfig.base}: about 1.1 M parameters)")
     p.add_argument("--lr", type=float, default=TrainConfig.lr)
     p.add_argument("--seed", type=int, default=TrainConfig.seed,
                    help=f"initial weights and batch order (default {TrainConfig.seed}); every run of one command shares it")
     p.add_argument("--highlights", choices=HIGHLIGHTS, default=TrainConfig.highlights,
                    help=f"clipped highlights in the loss (default {TrainConfig.highlights}; docs/dfdnet.md)")
-    p.add_argument("--init-disparity", type=float, default=TrainConfig.init_disparity,
-                   help="initial disparity output (the head's bias; default: PyTorch's initialisation, about 0.5)")
+    p.add_argument("--init-disparity", type=_init_arg, default=None, metavar="DISPARITY|pytorch",
+                   help=f"initial disparity output, the head's bias (default {TrainConfig.init_disparity}: near the background's "
+                        "disparity, 0; 'pytorch': PyTorch's initialisation, about 0.5, the default with --quick)")
     p.add_argument("--focus-prior", type=float, default=TrainConfig.w_focus, metavar="WEIGHT",
                    help="weight of a prior for the least defocus: WEIGHT x mean |disparity - focus| (default 0: off; docs/dfdnet.md)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
@@ -116,11 +149,11 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
 
 def _quick(a: argparse.Namespace) -> None:
     """Tiny data (64 px, far focus as the table), a few steps of drbokeh ``physical``."""
-    size = QUICK_SIZE if a.size == SIZE else a.size
+    size = a.size
     specs = [SplitSpec("train", 1711, 64, size, a.spp, a.focus, a.background_detail),
              SplitSpec("val", 1712, 8, size, a.spp, a.focus, a.background_detail),
              SplitSpec("test", 1713, 24, size, a.spp, a.focus, a.background_detail)]
-    cfg = TrainConfig(steps=a.steps if a.steps != TrainConfig.steps else 40, batch=a.batch, crop=min(64, size), base=8,
+    cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
                       init_disparity=a.init_disparity, w_focus=a.focus_prior)
     a.out.mkdir(parents=True, exist_ok=True)
@@ -148,7 +181,9 @@ def _quick(a: argparse.Namespace) -> None:
     _log(json.dumps(out))
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
+    """The command line, with the options left unset filled in (the table's values, or
+    ``--quick``'s)."""
     ap = argparse.ArgumentParser(prog="python -m drbokeh.dfdnet", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -164,6 +199,15 @@ def main(argv: Optional[List[str]] = None) -> int:
     r.add_argument("--retrain", action="store_true")
     r.add_argument("--note")
     a = ap.parse_args(argv)
+    quick = a.cmd == "train" and a.quick
+    if quick and a.size == SIZE:
+        a.size = QUICK_SIZE
+    _resolve(a, quick)
+    return a
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    a = parse_args(argv)
     if a.cmd == "train" and a.quick:
         _quick(a)
         return 0

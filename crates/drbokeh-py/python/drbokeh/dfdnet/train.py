@@ -78,9 +78,12 @@ def parse_run(name: str) -> RunSpec:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    steps: int = 500
-    batch: int = 4
-    crop: int = 64
+    # The table's protocol since session 12 (docs/dfdnet.md, session 11): whole 128 px
+    # images in batches of 2, 1500 steps, the disparity output starting at the far
+    # background's value. Every layer gains from each of these, and none changes the order.
+    steps: int = 1500
+    batch: int = 2
+    crop: int = 128
     lr: float = 4e-3
     base: int = 12
     seed: int = 17
@@ -98,7 +101,7 @@ class TrainConfig:
     highlights: str = "energy"
     # Initial value of the disparity output (the head's bias; None: PyTorch's default
     # initialisation, about 0.5).
-    init_disparity: Optional[float] = None
+    init_disparity: Optional[float] = 0.05
     # Weight of the focus prior: mean |disparity - focus| of the prediction (0: off).
     w_focus: float = 0.0
 
