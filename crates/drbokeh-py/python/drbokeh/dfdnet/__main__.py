@@ -149,10 +149,9 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
 
 def _quick(a: argparse.Namespace) -> None:
     """Tiny data (64 px, far focus as the table), a few steps of drbokeh ``physical``."""
-    size = a.size
-    specs = [SplitSpec("train", 1711, 64, size, a.spp, a.focus, a.background_detail),
-             SplitSpec("val", 1712, 8, size, a.spp, a.focus, a.background_detail),
-             SplitSpec("test", 1713, 24, size, a.spp, a.focus, a.background_detail)]
+    specs = [SplitSpec("train", 1711, 64, a.size, a.spp, a.focus, a.background_detail),
+             SplitSpec("val", 1712, 8, a.size, a.spp, a.focus, a.background_detail),
+             SplitSpec("test", 1713, 24, a.size, a.spp, a.focus, a.background_detail)]
     cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
                       init_disparity=a.init_disparity, w_focus=a.focus_prior)
