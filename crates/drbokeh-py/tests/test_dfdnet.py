@@ -184,6 +184,23 @@ def test_unset_options_take_the_table_protocol_or_quick_settings():
             parse_args(["train", "--out", "o", "--init-disparity", bad])
 
 
+@pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"]])
+def test_every_help_teaches_with_examples(cmd, capsys):
+    """`--help` of the program and of each command prints its description and examples
+    that name that command (the CLI's rule: help that teaches)."""
+    from drbokeh.dfdnet.__main__ import parse_args
+
+    with pytest.raises(SystemExit) as exit_info:
+        parse_args(cmd + ["--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    assert "examples:" in text
+    example_lines = [ln for ln in text.splitlines() if ln.strip().startswith("python -m drbokeh.dfdnet ")]
+    assert len(example_lines) >= 2
+    if cmd:
+        assert all(f"drbokeh.dfdnet {cmd[0]} " in ln for ln in example_lines)
+
+
 def test_focus_prior_adds_its_weighted_term_to_the_image_loss():
     from drbokeh.dfdnet.train import TrainConfig, image_loss
 

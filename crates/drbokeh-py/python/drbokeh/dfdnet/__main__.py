@@ -1,5 +1,8 @@
 """``python -m drbokeh.dfdnet train|eval|reproduce ... --out DIR``: depth networks trained
-through rendering layers, without depth labels (issue 17; supplement figs. 9-10).
+through rendering layers, without depth labels (the Dr.Bokeh supplement's figs. 9-10):
+a U-Net reads the all-in-focus image, predicts disparity, a rendering layer blurs the
+image with it, and the loss compares that with the ray-traced defocused image. The true
+disparity is used only to evaluate. Protocol and results: docs/dfdnet.md.
 
   train      train runs (default: the whole table) into DIR; ``--quick`` makes tiny data in
              DIR/data itself, trains drbokeh ``physical`` for a few steps and writes
@@ -180,23 +183,55 @@ def _quick(a: argparse.Namespace) -> None:
     _log(json.dumps(out))
 
 
+EXAMPLES = {
+    "main": """examples:
+  python -m drbokeh.dfdnet train --quick --out q        # a few minutes: tiny data, 40 steps
+  python -m drbokeh.dfdnet reproduce --data D --out R   # the whole table (about 45 min on 2 cores)
+  python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim,gausspsf-hssim --seed 18""",
+    "train": """examples:
+  python -m drbokeh.dfdnet train --quick --out q
+  python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim,gausspsf-hssim
+  python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim --focus-prior 1 --steps 500
+
+Runs already in DIR are kept (--retrain trains them again). Each run writes DIR/RUN/model.pt
+and DIR/RUN/log.json; the data is traced into --data (default DIR/data) once and reused.""",
+    "eval": """examples:
+  python -m drbokeh.dfdnet eval --data D --out R
+  python -m drbokeh.dfdnet eval --data D --out R --note "seed 18"
+
+Evaluates the runs trained in DIR on the test split: DIR/results.md and results.json,
+DIR/index.html with the test images, DIR/plots/*.svg (loss curves, validation MAE).""",
+    "reproduce": """examples:
+  python -m drbokeh.dfdnet reproduce --data D --out R
+  python -m drbokeh.dfdnet reproduce --data D --out R --seed 19
+
+Traces the data if --data lacks it, trains every run of the table (--jobs at once), then
+evaluates: the one command behind docs/dfdnet.md's table.""",
+}
+
+
 def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     """The command line, with the options left unset filled in (the table's values, or
     ``--quick``'s)."""
+    raw = argparse.RawDescriptionHelpFormatter
     ap = argparse.ArgumentParser(prog="python -m drbokeh.dfdnet", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+                                 epilog=EXAMPLES["main"], formatter_class=raw)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    t = sub.add_parser("train", help="train runs")
+    t = sub.add_parser("train", help="train runs", description="Train depth networks through rendering layers.",
+                       epilog=EXAMPLES["train"], formatter_class=raw)
     _common(t)
     t.add_argument("--quick", action="store_true", help="tiny self-made data, few steps, DIR/results.json")
     t.add_argument("--retrain", action="store_true", help="train runs again even if DIR has them")
-    e = sub.add_parser("eval", help="test table, HTML page, plots")
+    e = sub.add_parser("eval", help="test table, HTML page, plots", description="The test table of the runs in DIR.",
+                       epilog=EXAMPLES["eval"], formatter_class=raw)
     _common(e)
     e.add_argument("--note", help="a line put above the table (e.g. what is reduced)")
-    r = sub.add_parser("reproduce", help="train the whole table, then eval")
+    r = sub.add_parser("reproduce", help="train the whole table, then eval",
+                       description="Train the whole table, then evaluate it.", epilog=EXAMPLES["reproduce"],
+                       formatter_class=raw)
     _common(r)
-    r.add_argument("--retrain", action="store_true")
-    r.add_argument("--note")
+    r.add_argument("--retrain", action="store_true", help="train runs again even if DIR has them")
+    r.add_argument("--note", help="a line put above the table (e.g. what is reduced)")
     a = ap.parse_args(argv)
     quick = a.cmd == "train" and a.quick
     if quick and a.size == SIZE:
