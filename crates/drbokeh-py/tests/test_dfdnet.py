@@ -371,6 +371,26 @@ def test_quick_training_beats_the_untrained_network(quick_run):
     assert r["test_mae_trained"] < r["test_mae_untrained"] - 0.02, r
 
 
+def test_eval_loads_each_run_as_trained_and_starts_the_untrained_row_from_the_runs_start(quick_run, tmp_path):
+    """``eval`` with options other than the training's (another --seed, --base and start)
+    still loads the run at its logged width and reports the untrained network the run
+    started from: the quick run's own numbers come back."""
+    import shutil
+
+    from drbokeh.dfdnet.data import _load
+    from drbokeh.dfdnet.evaluate import evaluate
+    from drbokeh.dfdnet.train import RunSpec, TrainConfig
+
+    out, r = quick_run
+    shutil.copytree(out / "physical-hssim", tmp_path / "physical-hssim")
+    splits = {"test": _load(out / "data" / "test.npz")}
+    other = TrainConfig(seed=99, base=12, init_disparity=0.3)
+    res = evaluate(tmp_path, splits, [RunSpec("physical", "hssim")], other, html_scenes=1)
+    rows = {row["run"]: row for row in res["rows"]}
+    assert rows["physical-hssim"]["mae"] == pytest.approx(r["test_mae_trained"], abs=1e-5)
+    assert rows["untrained network"]["mae"] == pytest.approx(r["test_mae_untrained"], abs=1e-5)
+
+
 def test_quick_data_is_far_focus_only(quick_run):
     """Every kept scene focuses on the background (disparity 0, the farthest), so
     d = disparity - focus >= 0."""

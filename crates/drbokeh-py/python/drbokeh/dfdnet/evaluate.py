@@ -19,9 +19,10 @@ each scene's *true* disparity).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from html import escape
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -90,6 +91,14 @@ def _fmt(v: float, digits: int = 4) -> str:
     return "-" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
 
 
+def untrained_start(config: Dict[str, object], cfg: TrainConfig) -> Tuple[int, int, Optional[float]]:
+    """``(seed, base, init_disparity)`` of a run's logged training configuration (what its
+    network was before training); ``cfg``'s values where an older log lacks one."""
+    init = config.get("init_disparity", cfg.init_disparity)
+    return (int(config.get("seed", cfg.seed)), int(config.get("base", cfg.base)),  # type: ignore[arg-type]
+            None if init is None else float(init))  # type: ignore[arg-type]
+
+
 def evaluate(
     out_dir: Path,
     splits: Dict[str, Split],
@@ -103,19 +112,29 @@ def evaluate(
     test = splits["test"]
     rows: List[Dict[str, object]] = []
     preds: Dict[str, np.ndarray] = {}
+    starts = set()
     for spec in runs:
         run_dir = out_dir / spec.name
         if not (run_dir / "model.pt").exists():
             continue
         log = json.loads((run_dir / "log.json").read_text())
-        p = predict(load_model(run_dir, spec.config(cfg)), test.aif)
+        start = untrained_start(log["config"], cfg)
+        starts.add(start)
+        p = predict(load_model(run_dir, replace(spec.config(cfg), base=start[1])), test.aif)
         preds[spec.name] = p
         rows.append({
             "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),
             "seconds_per_step": log["seconds_per_step"], "seconds_per_epoch": log["seconds_per_epoch"],
             "epochs": log["epochs"], "steps": log["config"]["steps"],
         })
-    untrained = predict(new_model(cfg), test.aif)
+    # The untrained row is the start the runs trained from (their seed, width and initial
+    # disparity, from their logs) when they share one, so that runs trained with --seed 18
+    # are not compared with seed 17's start; the command line's otherwise.
+    untrained_cfg = cfg
+    if len(starts) == 1:
+        seed, base, init = starts.pop()
+        untrained_cfg = replace(cfg, seed=seed, base=base, init_disparity=init)
+    untrained = predict(new_model(untrained_cfg), test.aif)
     preds["untrained"] = untrained
     rows.append({"run": "untrained network", "layer": "-", "loss": "-", **metrics(untrained, test)})
     rows.append({"run": "constant (true median, oracle)", "layer": "-", "loss": "-", **metrics(constant_guess(test), test)})
