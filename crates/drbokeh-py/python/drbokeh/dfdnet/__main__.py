@@ -183,6 +183,9 @@ def _quick(a: argparse.Namespace) -> None:
     _log(json.dumps(out))
 
 
+RETRAIN_HELP = "train runs again even if DIR has them"
+NOTE_HELP = "a line put above the table (e.g. what is reduced)"
+
 EXAMPLES = {
     "main": """examples:
   python -m drbokeh.dfdnet train --quick --out q        # a few minutes: tiny data, 40 steps
@@ -221,17 +224,17 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                        epilog=EXAMPLES["train"], formatter_class=raw)
     _common(t)
     t.add_argument("--quick", action="store_true", help="tiny self-made data, few steps, DIR/results.json")
-    t.add_argument("--retrain", action="store_true", help="train runs again even if DIR has them")
+    t.add_argument("--retrain", action="store_true", help=RETRAIN_HELP)
     e = sub.add_parser("eval", help="test table, HTML page, plots", description="The test table of the runs in DIR.",
                        epilog=EXAMPLES["eval"], formatter_class=raw)
     _common(e)
-    e.add_argument("--note", help="a line put above the table (e.g. what is reduced)")
+    e.add_argument("--note", help=NOTE_HELP)
     r = sub.add_parser("reproduce", help="train the whole table, then eval",
                        description="Train the whole table, then evaluate it.", epilog=EXAMPLES["reproduce"],
                        formatter_class=raw)
     _common(r)
-    r.add_argument("--retrain", action="store_true", help="train runs again even if DIR has them")
-    r.add_argument("--note", help="a line put above the table (e.g. what is reduced)")
+    r.add_argument("--retrain", action="store_true", help=RETRAIN_HELP)
+    r.add_argument("--note", help=NOTE_HELP)
     a = ap.parse_args(argv)
     quick = a.cmd == "train" and a.quick
     if quick and a.size == SIZE:

@@ -91,12 +91,13 @@ def _fmt(v: float, digits: int = 4) -> str:
     return "-" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
 
 
-def untrained_start(config: Dict[str, object], cfg: TrainConfig) -> Tuple[int, int, Optional[float]]:
-    """``(seed, base, init_disparity)`` of a run's logged training configuration (what its
-    network was before training); ``cfg``'s values where an older log lacks one."""
-    init = config.get("init_disparity", cfg.init_disparity)
-    return (int(config.get("seed", cfg.seed)), int(config.get("base", cfg.base)),  # type: ignore[arg-type]
-            None if init is None else float(init))  # type: ignore[arg-type]
+def started_from(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` with the seed, U-Net width and initial disparity a run's log records (what
+    its network was before training); ``cfg``'s values where an older log lacks one."""
+    init = log_config.get("init_disparity", cfg.init_disparity)
+    return replace(cfg, seed=int(log_config.get("seed", cfg.seed)),  # type: ignore[arg-type]
+                   base=int(log_config.get("base", cfg.base)),  # type: ignore[arg-type]
+                   init_disparity=None if init is None else float(init))  # type: ignore[arg-type]
 
 
 def evaluate(
@@ -112,15 +113,15 @@ def evaluate(
     test = splits["test"]
     rows: List[Dict[str, object]] = []
     preds: Dict[str, np.ndarray] = {}
-    starts = set()
+    starts: Dict[Tuple[int, int, Optional[float]], TrainConfig] = {}
     for spec in runs:
         run_dir = out_dir / spec.name
         if not (run_dir / "model.pt").exists():
             continue
         log = json.loads((run_dir / "log.json").read_text())
-        start = untrained_start(log["config"], cfg)
-        starts.add(start)
-        p = predict(load_model(run_dir, replace(spec.config(cfg), base=start[1])), test.aif)
+        start = started_from(log["config"], cfg)
+        starts[(start.seed, start.base, start.init_disparity)] = start
+        p = predict(load_model(run_dir, spec.config(start)), test.aif)
         preds[spec.name] = p
         rows.append({
             "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),
@@ -130,10 +131,7 @@ def evaluate(
     # The untrained row is the start the runs trained from (their seed, width and initial
     # disparity, from their logs) when they share one, so that runs trained with --seed 18
     # are not compared with seed 17's start; the command line's otherwise.
-    untrained_cfg = cfg
-    if len(starts) == 1:
-        seed, base, init = starts.pop()
-        untrained_cfg = replace(cfg, seed=seed, base=base, init_disparity=init)
+    untrained_cfg = next(iter(starts.values())) if len(starts) == 1 else cfg
     untrained = predict(new_model(untrained_cfg), test.aif)
     preds["untrained"] = untrained
     rows.append({"run": "untrained network", "layer": "-", "loss": "-", **metrics(untrained, test)})
