@@ -184,6 +184,35 @@ def test_unset_options_take_the_table_protocol_or_quick_settings():
             parse_args(["train", "--out", "o", "--init-disparity", bad])
 
 
+def test_min_blur_keeps_the_scenes_with_enough_blur_in_every_split():
+    """--min-blur leaves out, in every split, the scenes whose largest blur K is below it
+    (their arrays and names together); 0 keeps all; a split left empty, a negative or a
+    non-finite threshold is an error."""
+    from drbokeh.dfdnet.data import Split, with_min_blur
+
+    def split(blurs):
+        n = len(blurs)
+        return Split(np.arange(n * 3 * 4, dtype=np.float32).reshape(n, 3, 2, 2), np.zeros((n, 3, 2, 2), np.float32),
+                     np.zeros((n, 1, 2, 2), np.float32), np.zeros(n, np.float32), np.array(blurs, np.float32),
+                     np.ones(n), np.ones(n), [f"s{i}" for i in range(n)])
+
+    splits = {"train": split([1.0, 3.0, 9.0, 2.9]), "test": split([3.0, 1.5])}
+    kept = with_min_blur(splits, 3.0)
+    assert kept["train"].names == ["s1", "s2"] and kept["test"].names == ["s0"]
+    assert np.array_equal(kept["train"].aif, splits["train"].aif[[1, 2]])
+    assert np.array_equal(kept["train"].blur, [3.0, 9.0])
+    assert [len(v) for v in with_min_blur(splits, 0.0).values()] == [4, 2]
+    with pytest.raises(ValueError, match="no test scene"):
+        with_min_blur(splits, 5.0)
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="minimum blur"):
+            with_min_blur(splits, bad)
+    from drbokeh.dfdnet.__main__ import parse_args
+
+    assert parse_args(["train", "--out", "o"]).min_blur == 0.0
+    assert parse_args(["eval", "--out", "o", "--min-blur", "3"]).min_blur == 3.0
+
+
 @pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"]])
 def test_every_help_teaches_with_examples(cmd, capsys):
     """`--help` of the program and of each command prints its description and examples

@@ -15,15 +15,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 import numpy as np
 
-from .data import FOCUS, SplitSpec, default_splits, prepare
+from .data import FOCUS, Split, SplitSpec, default_splits, prepare, with_min_blur
 from .evaluate import evaluate, metrics
 from .train import HIGHLIGHTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
@@ -72,6 +73,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--background-detail", type=float, default=None, metavar="STRENGTH",
                    help=f"fine detail on the scenes' backgrounds, in [0, 1] (default {BACKGROUND_DETAIL}; 0 with --quick; "
                         "drbokeh benchmark make --background-detail; docs/dfdnet.md)")
+    p.add_argument("--min-blur", type=float, default=0.0, metavar="K_PX",
+                   help="keep only scenes whose largest blur K is at least K_PX pixels, in every split "
+                        "(default 0: all; the scenes are traced and cached as without it)")
     p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
     p.add_argument("--val-scenes", type=int, default=32)
     p.add_argument("--test-scenes", type=int, default=64)
@@ -120,10 +124,26 @@ def _runs(a: argparse.Namespace) -> List[RunSpec]:
         raise SystemExit(f"--runs: {e}")
 
 
+def _splits(a: argparse.Namespace) -> Dict[str, Split]:
+    """Every split, traced into --data if missing, with the scenes below --min-blur left out."""
+    if not (math.isfinite(a.min_blur) and a.min_blur >= 0.0):
+        raise SystemExit(f"--min-blur {a.min_blur}: must be a blur radius in pixels, >= 0")
+    splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+    try:
+        kept = with_min_blur(splits, a.min_blur)
+    except ValueError as e:
+        raise SystemExit(f"--min-blur: {e}")
+    if a.min_blur > 0:
+        for name in kept:
+            _log(f"data: {name}: {len(kept[name])} of {len(splits[name])} scenes with K >= {a.min_blur} px")
+    return kept
+
+
 def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
     a.out.mkdir(parents=True, exist_ok=True)
-    splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
-    (a.out / "config.json").write_text(json.dumps({"train": asdict(cfg), "splits": [s.__dict__ for s in _specs(a)]}, indent=1))
+    splits = _splits(a)
+    (a.out / "config.json").write_text(json.dumps(
+        {"train": asdict(cfg), "splits": [s.__dict__ for s in _specs(a)], "min_blur_px": a.min_blur}, indent=1))
     todo = []
     for spec in runs:
         if existing(a.out, spec) is not None and not a.retrain:
@@ -143,7 +163,7 @@ def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None
 
 
 def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
-    splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+    splits = _splits(a)
     res = evaluate(a.out, splits, runs, cfg, note=a.note or "")
     _log(f"wrote {a.out / 'results.md'}, {a.out / 'index.html'}")
     print((a.out / "results.md").read_text())

@@ -197,6 +197,24 @@ def subset(split: Split, keep: np.ndarray) -> Split:
     )
 
 
+def with_min_blur(splits: Dict[str, Split], min_blur_px: float) -> Dict[str, Split]:
+    """Every split with only its scenes whose largest blur K is at least ``min_blur_px``
+    pixels (all of them for 0). A split left with no scene is an error, and so is a
+    negative or non-finite threshold."""
+    if not (np.isfinite(min_blur_px) and min_blur_px >= 0.0):
+        raise ValueError(f"minimum blur {min_blur_px}: must be a radius in pixels, >= 0")
+    if min_blur_px == 0.0:
+        return dict(splits)
+    out: Dict[str, Split] = {}
+    for name, split in splits.items():
+        kept = subset(split, split.blur >= min_blur_px)
+        if len(kept) == 0:
+            largest = float(split.blur.max()) if len(split) else 0.0
+            raise ValueError(f"minimum blur {min_blur_px} px: no {name} scene has a blur that large (largest {largest:.2f} px)")
+        out[name] = kept
+    return out
+
+
 def random_crops(
     split: Split, indices: np.ndarray, crop: int, rng: np.random.Generator,
     extra: Optional[Dict[str, np.ndarray]] = None,
