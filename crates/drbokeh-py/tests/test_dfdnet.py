@@ -211,6 +211,9 @@ def test_min_blur_keeps_the_scenes_with_enough_blur_in_every_split():
 
     assert parse_args(["train", "--out", "o"]).min_blur == 0.0
     assert parse_args(["eval", "--out", "o", "--min-blur", "3"]).min_blur == 3.0
+    for bad in ("-1", "nan", "inf", "three"):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", "--min-blur", bad])
 
 
 @pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"]])

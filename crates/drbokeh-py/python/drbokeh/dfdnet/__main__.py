@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import asdict, replace
@@ -51,6 +50,16 @@ def _init_arg(text: str) -> object:
     return v
 
 
+def _min_blur_arg(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (np.isfinite(v) and v >= 0.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels, >= 0")
+    return v
+
+
 def _resolve(a: argparse.Namespace, quick: bool) -> None:
     """Fills the options left unset with the table's values, or --quick's."""
     table = {"steps": TrainConfig.steps, "batch": TrainConfig.batch, "crop": a.size,
@@ -73,7 +82,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--background-detail", type=float, default=None, metavar="STRENGTH",
                    help=f"fine detail on the scenes' backgrounds, in [0, 1] (default {BACKGROUND_DETAIL}; 0 with --quick; "
                         "drbokeh benchmark make --background-detail; docs/dfdnet.md)")
-    p.add_argument("--min-blur", type=float, default=0.0, metavar="K_PX",
+    p.add_argument("--min-blur", type=_min_blur_arg, default=0.0, metavar="K_PX",
                    help="keep only scenes whose largest blur K is at least K_PX pixels, in every split "
                         "(default 0: all; the scenes are traced and cached as without it)")
     p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
@@ -126,8 +135,6 @@ def _runs(a: argparse.Namespace) -> List[RunSpec]:
 
 def _splits(a: argparse.Namespace) -> Dict[str, Split]:
     """Every split, traced into --data if missing, with the scenes below --min-blur left out."""
-    if not (math.isfinite(a.min_blur) and a.min_blur >= 0.0):
-        raise SystemExit(f"--min-blur {a.min_blur}: must be a blur radius in pixels, >= 0")
     splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
     try:
         kept = with_min_blur(splits, a.min_blur)
