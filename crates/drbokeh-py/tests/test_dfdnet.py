@@ -216,6 +216,46 @@ def test_min_blur_keeps_the_scenes_with_enough_blur_in_every_split():
             parse_args(["train", "--out", "o", "--min-blur", bad])
 
 
+def test_data_cache_is_shared_safely_and_a_damaged_one_is_a_one_line_error(tmp_path):
+    """The cache record (``splits.json``) is written only when it changes, so processes
+    sharing ``--data`` (training and eval side by side) never read it half-written; a
+    damaged record or cached split is a ValueError naming the file (at the command line,
+    one line, exit status not 0), before any tracing."""
+    from drbokeh.dfdnet.__main__ import main
+    from drbokeh.dfdnet.data import Split, SplitSpec, _save, prepare
+
+    spec = SplitSpec("train", 1711, 2, 16, 4, "far")
+    n = 2
+    split = Split(np.zeros((n, 3, 16, 16), np.float32), np.zeros((n, 3, 16, 16), np.float32),
+                  np.zeros((n, 1, 16, 16), np.float32), np.zeros(n, np.float32), np.full(n, 3.0, np.float32),
+                  np.ones(n), np.ones(n), ["a", "b"])
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    _save(split, cache / "train.npz")
+    loaded = prepare(cache, [spec], cli="/nonexistent/drbokeh")["train"]  # cached: never traced
+    assert loaded.names == ["a", "b"] and np.array_equal(loaded.blur, split.blur)
+    record = cache / "splits.json"
+    stamp = record.stat().st_mtime_ns
+    os.utime(record, ns=(stamp - 10**9, stamp - 10**9))
+    prepare(cache, [spec], cli="/nonexistent/drbokeh")
+    assert record.stat().st_mtime_ns == stamp - 10**9, "an unchanged record was written again"
+    assert sorted(p.name for p in cache.iterdir()) == ["splits.json", "train.npz"], "a temporary file was left"
+
+    good = (cache / "train.npz").read_bytes()
+    for damaged in (good[: len(good) // 2], b"not an npz"):
+        (cache / "train.npz").write_bytes(damaged)
+        with pytest.raises(ValueError, match="train.npz: not a cached split"):
+            prepare(cache, [spec], cli="/nonexistent/drbokeh")
+    for bad in ("", "{", "7", '["x"]'):
+        record.write_text(bad)
+        with pytest.raises(ValueError, match="splits.json: not a record of splits"):
+            prepare(cache, [spec], cli="/nonexistent/drbokeh")
+        with pytest.raises(SystemExit) as exit_info:
+            main(["eval", "--data", str(cache), "--out", str(tmp_path / "o"), "--drbokeh", "/nonexistent/drbokeh"])
+        message = str(exit_info.value.code)
+        assert message.startswith("--data: ") and "splits.json" in message and "\n" not in message
+
+
 @pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"]])
 def test_every_help_teaches_with_examples(cmd, capsys):
     """`--help` of the program and of each command prints its description and examples

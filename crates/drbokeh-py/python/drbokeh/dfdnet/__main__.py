@@ -135,7 +135,10 @@ def _runs(a: argparse.Namespace) -> List[RunSpec]:
 
 def _splits(a: argparse.Namespace) -> Dict[str, Split]:
     """Every split, traced into --data if missing, with the scenes below --min-blur left out."""
-    splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+    try:
+        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+    except ValueError as e:
+        raise SystemExit(f"--data: {e}")
     try:
         kept = with_min_blur(splits, a.min_blur)
     except ValueError as e:

@@ -25,6 +25,7 @@ import json
 import os
 import shutil
 import subprocess
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
@@ -145,7 +146,7 @@ def load_benchmark_dir(directory: Path, focus: str = "near") -> Split:
 
 
 def _save(split: Split, path: Path) -> None:
-    tmp = path.with_suffix(".tmp.npz")
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")  # one per process: no two writers share it
     np.savez(
         tmp, aif=split.aif, bokeh=split.bokeh, disparity=split.disparity, focus=split.focus,
         blur=split.blur, near_mm=split.near_mm, far_mm=split.far_mm, names=np.array(split.names),
@@ -154,11 +155,21 @@ def _save(split: Split, path: Path) -> None:
 
 
 def _load(path: Path) -> Split:
-    z = np.load(path)
-    return Split(
-        z["aif"], z["bokeh"], z["disparity"], z["focus"], z["blur"], z["near_mm"], z["far_mm"],
-        [str(n) for n in z["names"]],
-    )
+    """A cached split; a file that is not one (truncated, corrupt, another array file) is a
+    ``ValueError`` naming it."""
+    try:
+        with np.load(path) as z:
+            split = Split(
+                z["aif"], z["bokeh"], z["disparity"], z["focus"], z["blur"], z["near_mm"], z["far_mm"],
+                [str(n) for n in z["names"]],
+            )
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{path}: not a cached split ({type(e).__name__}: {e}); delete it to trace it again") from None
+    n = len(split.names)
+    shapes = [a.shape[0] for a in (split.aif, split.bokeh, split.disparity, split.focus, split.blur)]
+    if any(m != n for m in shapes):
+        raise ValueError(f"{path}: not a cached split (arrays of {shapes} scenes for {n} names); delete it to trace it again")
+    return split
 
 
 def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = None, threads: int = 1, log=print) -> Dict[str, Split]:
@@ -169,10 +180,23 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
     data_dir.mkdir(parents=True, exist_ok=True)
     record = data_dir / "splits.json"
     want = [s.__dict__ for s in specs]
-    # Caches from before the focus option are near focus; from before the detail option, without.
-    if record.exists() and [{"focus": "near", "background_detail": 0.0, **r} for r in json.loads(record.read_text())] != want:
-        raise ValueError(f"{record} was made with other splits; use another --data directory")
-    record.write_text(json.dumps(want, indent=1))
+    text = json.dumps(want, indent=1)
+    old = None
+    if record.exists():
+        try:
+            old = record.read_text()
+            # Caches from before the focus option are near focus; from before the detail option, without.
+            made = [{"focus": "near", "background_detail": 0.0, **r} for r in json.loads(old)]
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"{record}: not a record of splits ({e}); delete it or use another --data directory") from None
+        if made != want:
+            raise ValueError(f"{record} was made with other splits; use another --data directory")
+    # Written only when it changes, and whole (a temporary file renamed over it): processes
+    # that share the cache (training and eval side by side) never read a half-written record.
+    if old != text:
+        tmp = record.with_name(f".splits.{os.getpid()}.tmp")
+        tmp.write_text(text)
+        tmp.replace(record)
     out: Dict[str, Split] = {}
     for spec in specs:
         cache = data_dir / f"{spec.name}.npz"
