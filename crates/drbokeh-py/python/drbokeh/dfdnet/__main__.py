@@ -23,7 +23,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from .data import FOCUS, Split, SplitSpec, default_splits, prepare, with_min_blur
+from .data import FOCUS, Split, SplitSpec, check_min_blur, default_splits, prepare, with_min_blur
 from .evaluate import evaluate, metrics
 from .train import HIGHLIGHTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
@@ -54,10 +54,11 @@ def _min_blur_arg(text: str) -> float:
     try:
         v = float(text)
     except ValueError:
-        v = float("nan")
-    if not (np.isfinite(v) and v >= 0.0):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels, >= 0")
-    return v
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels, >= 0") from None
+    try:
+        return check_min_blur(v)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _resolve(a: argparse.Namespace, quick: bool) -> None:

@@ -145,8 +145,14 @@ def load_benchmark_dir(directory: Path, focus: str = "near") -> Split:
     )
 
 
+def _temp_beside(path: Path) -> Path:
+    """A temporary name next to ``path``, one per process (no two writers share it), with
+    ``path``'s suffix: written whole, then renamed over ``path``."""
+    return path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+
+
 def _save(split: Split, path: Path) -> None:
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")  # one per process: no two writers share it
+    tmp = _temp_beside(path)
     np.savez(
         tmp, aif=split.aif, bokeh=split.bokeh, disparity=split.disparity, focus=split.focus,
         blur=split.blur, near_mm=split.near_mm, far_mm=split.far_mm, names=np.array(split.names),
@@ -194,7 +200,7 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
     # Written only when it changes, and whole (a temporary file renamed over it): processes
     # that share the cache (training and eval side by side) never read a half-written record.
     if old != text:
-        tmp = record.with_name(f".splits.{os.getpid()}.tmp")
+        tmp = _temp_beside(record)
         tmp.write_text(text)
         tmp.replace(record)
     out: Dict[str, Split] = {}
@@ -221,13 +227,18 @@ def subset(split: Split, keep: np.ndarray) -> Split:
     )
 
 
+def check_min_blur(min_blur_px: float) -> float:
+    """``min_blur_px`` if it is a blur radius in pixels (finite, >= 0); else a ``ValueError``."""
+    if not (np.isfinite(min_blur_px) and min_blur_px >= 0.0):
+        raise ValueError(f"minimum blur {min_blur_px}: must be a radius in pixels, >= 0")
+    return min_blur_px
+
+
 def with_min_blur(splits: Dict[str, Split], min_blur_px: float) -> Dict[str, Split]:
     """Every split with only its scenes whose largest blur K is at least ``min_blur_px``
     pixels (all of them for 0). A split left with no scene is an error, and so is a
-    negative or non-finite threshold."""
-    if not (np.isfinite(min_blur_px) and min_blur_px >= 0.0):
-        raise ValueError(f"minimum blur {min_blur_px}: must be a radius in pixels, >= 0")
-    if min_blur_px == 0.0:
+    negative or non-finite threshold (:func:`check_min_blur`)."""
+    if check_min_blur(min_blur_px) == 0.0:
         return dict(splits)
     out: Dict[str, Split] = {}
     for name, split in splits.items():
