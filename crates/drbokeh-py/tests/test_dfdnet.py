@@ -407,6 +407,67 @@ def test_occlusion_layer_is_one_layer_at_a_constant_and_cuts_at_a_step():
     assert g[0, 0, 2:9, 2:9].sum() < 0  # the far side is pushed up, towards the target's 0.3
 
 
+def test_movable_stack_keeps_the_render_and_adds_the_membership_gradient():
+    """``physical3m``: the stack of ``physical3`` with the same alphas (but for the floor on
+    the empty pixels of a layer that has a cut), the input's colour on those pixels, and an
+    alpha whose derivative with respect to the disparity is the membership's,
+    ``sigmoid'((d - t_n) / w) / w`` where no nearer layer covers the pixel, 0 where one does
+    and on the back layer."""
+    rng = np.random.default_rng(7)
+    aif = torch.from_numpy(rng.random((1, 3, 32, 32)).astype(np.float32) * 0.8 + 0.1)
+    f, k = torch.tensor([0.0]), torch.tensor([4.0])
+    step = torch.full((1, 1, 32, 32), 0.1)
+    step[..., 10:22, 10:22] = 0.8
+    step[..., 10:22, 4:8] = 0.3  # a pixel column band between the levels
+    fixed_rgb, fixed_alpha, fixed_disp = layers.occlusion_stack(aif, step, f, k, 3)
+    d = step.clone().requires_grad_(True)
+    width = 0.05
+    rgb, alpha, disp = layers.occlusion_stack(aif, d, f, k, 3, movable_width=width)
+    assert torch.equal(disp.detach(), fixed_disp)
+    from drbokeh import _native
+
+    dec = _native.decompose(
+        aif[0].permute(1, 2, 0).contiguous().numpy(), layers.quantised(step[0, 0].numpy(), 3), max_layers=3, threads=1
+    )
+    cuts = list(dec["thresholds"])
+    assert 1 <= len(cuts) <= 2
+    covers = (fixed_alpha > 0.5).to(torch.int32)
+    nearer = (torch.cumsum(covers, 1) - covers) > 0
+    floor = layers.MOVABLE_ALPHA_FLOOR
+    for n in range(3):
+        if n < len(cuts):
+            free = ~nearer[0, n]
+            empty = free & (fixed_alpha[0, n] < floor)
+            assert empty.any() and not empty.all()
+            want = torch.where(empty, torch.full_like(fixed_alpha[0, n], floor), fixed_alpha[0, n])
+            assert torch.allclose(alpha[0, n].detach(), want, atol=1e-7)
+            assert torch.equal(rgb[0, n][empty], aif[0].permute(1, 2, 0)[empty])
+            assert torch.equal(rgb[0, n][~empty], fixed_rgb[0, n][~empty])
+            (g,) = torch.autograd.grad(alpha[0, n].sum(), d, retain_graph=True)
+            s = torch.sigmoid((step[0, 0] - cuts[n]) / width)
+            expect = torch.where(free, s * (1 - s) / width, torch.zeros_like(s))
+            assert torch.allclose(g[0, 0], expect, atol=1e-5)
+            assert g[0, 0][free].abs().max() > 0.1 and torch.all(g[0, 0][~free] == 0)
+        else:
+            assert torch.equal(alpha[0, n].detach(), fixed_alpha[0, n])
+            (g,) = torch.autograd.grad(alpha[0, n].sum(), d, retain_graph=True, allow_unused=True)
+            assert g is None or torch.all(g == 0)
+    # the render differs from the fixed stack's by the floor's share only
+    fixed_out = layers.make_layer("physical3")(aif, step, f, k)
+    moved_out = layers.make_layer("physical3m")(aif, step, f, k)
+    assert 0 < torch.abs(fixed_out - moved_out).max() < 0.01
+    # levels closer than two widths (here 0.06 apart): the fixed stack, value and gradient
+    near = 0.3 + (step - 0.1) * (0.12 / 0.7)
+    assert not layers.separated(near[0, 0].numpy(), 3, layers.MOVABLE_WIDTH)
+    assert layers.separated(step[0, 0].numpy(), 3, layers.MOVABLE_WIDTH)
+    grads = []
+    for name in ("physical3", "physical3m"):
+        dn = near.clone().requires_grad_(True)
+        out = layers.make_layer(name)(aif, dn, f, k)
+        grads.append((out.detach(), torch.autograd.grad((out - fixed_out).abs().mean(), dn)[0]))
+    assert torch.equal(grads[0][0], grads[1][0]) and torch.equal(grads[0][1], grads[1][1])
+
+
 # ---- the quick training run -----------------------------------------------------------------
 
 
