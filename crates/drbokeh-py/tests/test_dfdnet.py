@@ -524,6 +524,55 @@ def test_eval_loads_each_run_as_trained_and_starts_the_untrained_row_from_the_ru
     assert rows["untrained network"]["mae"] == pytest.approx(r["test_mae_untrained"], abs=1e-5)
 
 
+def _tiny_split(seed: int, n: int = 4, size: int = 32):
+    from drbokeh.dfdnet.data import Split
+
+    rng = np.random.default_rng(seed)
+    disparity = np.zeros((n, 1, size, size), np.float32)
+    disparity[:, :, 8:24, 8:24] = 0.6
+    return Split(
+        aif=rng.random((n, 3, size, size), dtype=np.float32), bokeh=rng.random((n, 3, size, size), dtype=np.float32),
+        disparity=disparity, focus=np.zeros(n, np.float32), blur=np.full(n, 3.0, np.float32),
+        near_mm=np.full(n, 500.0), far_mm=np.full(n, 5000.0), names=[f"s{i}" for i in range(n)],
+    )
+
+
+def test_the_network_can_see_the_defocused_image_too(tmp_path):
+    """``--inputs aif+bokeh``: the network takes the all-in-focus and the defocused image
+    (6 channels) in training, validation and eval; its prediction depends on the defocused
+    image; the log records the input, so ``eval`` without the option loads the run as
+    trained; an unknown input is refused."""
+    import torch
+
+    from drbokeh.dfdnet.__main__ import _cfg, parse_args
+    from drbokeh.dfdnet.evaluate import evaluate
+    from drbokeh.dfdnet.train import RunSpec, TrainConfig, load_model, new_model, predict, train_run
+
+    assert _cfg(parse_args(["train", "--out", "o"])).inputs == "aif"
+    cfg = _cfg(parse_args(["train", "--out", "o", "--inputs", "aif+bokeh"]))
+    assert cfg.inputs == "aif+bokeh" and cfg.in_channels == 6
+    with pytest.raises(SystemExit):
+        parse_args(["train", "--out", "o", "--inputs", "bokeh"])
+    with pytest.raises(ValueError, match="unknown network input"):
+        TrainConfig(inputs="bokeh")
+    assert new_model(TrainConfig(base=4)).down[0][0].in_channels == 3
+    assert new_model(TrainConfig(base=4, inputs="aif+bokeh")).down[0][0].in_channels == 6
+
+    splits = {"train": _tiny_split(1), "val": _tiny_split(2, 2), "test": _tiny_split(3, 2)}
+    cfg = TrainConfig(steps=2, batch=2, crop=32, base=4, eval_every=1, inputs="aif+bokeh")
+    r = train_run(RunSpec("gausspsf", "l1g"), splits, cfg, tmp_path, log=lambda m: None)
+    assert r["config"]["inputs"] == "aif+bokeh"
+    model = load_model(tmp_path / "gausspsf-l1g", cfg)
+    test = splits["test"]
+    pred = predict(model, cfg.input_of(test.aif, test.bokeh))
+    with torch.no_grad():
+        other = predict(model, cfg.input_of(test.aif, 1.0 - test.bokeh))
+    assert np.abs(pred - other).max() > 1e-4  # the defocused image reaches the prediction
+    res = evaluate(tmp_path, splits, [RunSpec("gausspsf", "l1g")], TrainConfig(base=4), html_scenes=1)
+    rows = {row["run"]: row for row in res["rows"]}
+    assert rows["gausspsf-l1g"]["mae"] == pytest.approx(float(np.abs(pred - test.disparity).mean()), abs=1e-6)
+
+
 def test_quick_data_is_far_focus_only(quick_run):
     """Every kept scene focuses on the background (disparity 0, the farthest), so
     d = disparity - focus >= 0."""

@@ -25,7 +25,7 @@ import numpy as np
 
 from .data import FOCUS, Split, SplitSpec, check_min_blur, default_splits, prepare, with_min_blur
 from .evaluate import evaluate, metrics
-from .train import HIGHLIGHTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
+from .train import HIGHLIGHTS, INPUTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
 
 _log = log_line
@@ -105,6 +105,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--init-disparity", type=_init_arg, default=None, metavar="DISPARITY|pytorch",
                    help=f"initial disparity output, the head's bias (default {TrainConfig.init_disparity}: near the background's "
                         "disparity, 0; 'pytorch': PyTorch's initialisation, about 0.5, the default with --quick)")
+    p.add_argument("--inputs", choices=INPUTS, default=TrainConfig.inputs,
+                   help="what the network sees: the all-in-focus image (default, depth from one image; the defocused "
+                        "image is only the loss's target) or 'aif+bokeh', the defocused image beside it (depth from the pair)")
     p.add_argument("--focus-prior", type=float, default=TrainConfig.w_focus, metavar="WEIGHT",
                    help="weight of a prior for the least defocus: WEIGHT x mean |disparity - focus| (default 0: off; docs/dfdnet.md)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
@@ -122,7 +125,7 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
-                       highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior)
+                       highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs)
 
 
 def _runs(a: argparse.Namespace) -> List[RunSpec]:
@@ -188,7 +191,7 @@ def _quick(a: argparse.Namespace) -> None:
              SplitSpec("test", 1713, 24, a.size, a.spp, a.focus, a.background_detail)]
     cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
-                      init_disparity=a.init_disparity, w_focus=a.focus_prior)
+                      init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs)
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")
@@ -199,8 +202,9 @@ def _quick(a: argparse.Namespace) -> None:
 
     test = splits["test"]
     trained_model, untrained_model = load_model(a.out / spec.name, cfg), new_model(cfg)
-    trained = metrics(predict(trained_model, test.aif), test)
-    untrained = metrics(predict(untrained_model, test.aif), test)
+    test_input = cfg.input_of(test.aif, test.bokeh)
+    trained = metrics(predict(trained_model, test_input), test)
+    untrained = metrics(predict(untrained_model, test_input), test)
     out = {
         "run": spec.name, "steps": cfg.steps,
         "loss_first": float(np.mean(losses[:n])), "loss_last": float(np.mean(losses[-n:])),

@@ -92,12 +92,14 @@ def _fmt(v: float, digits: int = 4) -> str:
 
 
 def started_from(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig:
-    """``cfg`` with the seed, U-Net width and initial disparity a run's log records (what
-    its network was before training); ``cfg``'s values where an older log lacks one."""
+    """``cfg`` with the seed, U-Net width, initial disparity and network input a run's log
+    records (what its network was before training); ``cfg``'s values where an older log
+    lacks one (logs from before the input option: the all-in-focus image)."""
     init = log_config.get("init_disparity", cfg.init_disparity)
     return replace(cfg, seed=int(log_config.get("seed", cfg.seed)),  # type: ignore[arg-type]
                    base=int(log_config.get("base", cfg.base)),  # type: ignore[arg-type]
-                   init_disparity=None if init is None else float(init))  # type: ignore[arg-type]
+                   init_disparity=None if init is None else float(init),  # type: ignore[arg-type]
+                   inputs=str(log_config.get("inputs", "aif")))
 
 
 def evaluate(
@@ -113,15 +115,15 @@ def evaluate(
     test = splits["test"]
     rows: List[Dict[str, object]] = []
     preds: Dict[str, np.ndarray] = {}
-    starts: Dict[Tuple[int, int, Optional[float]], TrainConfig] = {}
+    starts: Dict[Tuple[int, int, Optional[float], str], TrainConfig] = {}
     for spec in runs:
         run_dir = out_dir / spec.name
         if not (run_dir / "model.pt").exists():
             continue
         log = json.loads((run_dir / "log.json").read_text())
         start = started_from(log["config"], cfg)
-        starts[(start.seed, start.base, start.init_disparity)] = start
-        p = predict(load_model(run_dir, spec.config(start)), test.aif)
+        starts[(start.seed, start.base, start.init_disparity, start.inputs)] = start
+        p = predict(load_model(run_dir, spec.config(start)), start.input_of(test.aif, test.bokeh))
         preds[spec.name] = p
         rows.append({
             "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),
@@ -132,7 +134,7 @@ def evaluate(
     # disparity, from their logs) when they share one, so that runs trained with --seed 18
     # are not compared with seed 17's start; the command line's otherwise.
     untrained_cfg = next(iter(starts.values())) if len(starts) == 1 else cfg
-    untrained = predict(new_model(untrained_cfg), test.aif)
+    untrained = predict(new_model(untrained_cfg), untrained_cfg.input_of(test.aif, test.bokeh))
     preds["untrained"] = untrained
     rows.append({"run": "untrained network", "layer": "-", "loss": "-", **metrics(untrained, test)})
     rows.append({"run": "constant (true median, oracle)", "layer": "-", "loss": "-", **metrics(constant_guess(test), test)})

@@ -24,6 +24,21 @@ from .unet import UNet, parameter_count
 
 HIGHLIGHTS = ("none", "reach", "energy", "energy+reach")
 
+# What the network sees: the all-in-focus image (the issue's set-up: depth from one image,
+# the defocused image only in the loss), or the traced defocused image beside it (depth
+# from the pair: what the pair says about depth depends on the layer's model of the blur).
+INPUTS = ("aif", "aif+bokeh")
+
+
+def network_input(aif: np.ndarray, bokeh: np.ndarray, inputs: str) -> np.ndarray:
+    """The network's input ``(N, C, H, W)`` for ``inputs`` (:data:`INPUTS`): ``aif``, or
+    ``aif`` and ``bokeh`` stacked along the channels."""
+    if inputs == "aif":
+        return aif
+    if inputs == "aif+bokeh":
+        return np.concatenate([aif, bokeh], 1)
+    raise ValueError(f"unknown network input {inputs!r} (available: {', '.join(INPUTS)})")
+
 
 @dataclass(frozen=True)
 class RunSpec:
@@ -104,11 +119,25 @@ class TrainConfig:
     init_disparity: Optional[float] = 0.05
     # Weight of the focus prior: mean |disparity - focus| of the prediction (0: off).
     w_focus: float = 0.0
+    # What the network sees (INPUTS).
+    inputs: str = "aif"
+
+    def __post_init__(self) -> None:
+        if self.inputs not in INPUTS:
+            raise ValueError(f"unknown network input {self.inputs!r} (available: {', '.join(INPUTS)})")
+
+    @property
+    def in_channels(self) -> int:
+        return 3 if self.inputs == "aif" else 6
+
+    def input_of(self, aif: np.ndarray, bokeh: np.ndarray) -> np.ndarray:
+        """:func:`network_input` with this configuration's ``inputs``."""
+        return network_input(aif, bokeh, self.inputs)
 
 
 def new_model(cfg: TrainConfig) -> UNet:
     torch.manual_seed(cfg.seed)
-    model = UNet(cfg.base)
+    model = UNet(cfg.base, cfg.in_channels)
     if cfg.init_disparity is not None:
         p = min(max(cfg.init_disparity, 1e-3), 1 - 1e-3)
         with torch.no_grad():
@@ -130,9 +159,10 @@ def highlight_arrays(split: Split, mode: str) -> Dict[str, np.ndarray]:
 
 
 @torch.no_grad()
-def predict(model: UNet, aif: np.ndarray, batch: int = 8) -> np.ndarray:
+def predict(model: UNet, x: np.ndarray, batch: int = 8) -> np.ndarray:
+    """The disparity the network predicts for its inputs ``x`` (``TrainConfig.input_of``)."""
     model.eval()
-    outs = [model(torch.from_numpy(aif[i : i + batch])).numpy() for i in range(0, len(aif), batch)]
+    outs = [model(torch.from_numpy(x[i : i + batch])).numpy() for i in range(0, len(x), batch)]
     model.train()
     return np.concatenate(outs)
 
@@ -212,8 +242,7 @@ def train_run(
         pos += cfg.batch
         b = random_crops(train, idx, cfg.crop, rng, extra)
         t0 = time.perf_counter()
-        aif = torch.from_numpy(b["aif"])
-        pred = model(aif)
+        pred = model(torch.from_numpy(cfg.input_of(b["aif"], b["bokeh"])))
         if layer is None:
             loss = (pred - torch.from_numpy(b["disparity"])).abs().mean()
             terms = {"disparity_l1": float(loss.detach())}
@@ -226,7 +255,7 @@ def train_run(
         step_seconds.append(time.perf_counter() - t0)
         curve.append({"step": step, "loss": float(loss.detach()), **terms})
         if (step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps:
-            mae = float(np.abs(predict(model, val.aif) - val.disparity).mean())
+            mae = float(np.abs(predict(model, cfg.input_of(val.aif, val.bokeh)) - val.disparity).mean())
             val_curve.append({"step": step + 1, "val_mae": mae})
             log(f"{spec.name}: step {step + 1}/{cfg.steps} loss {float(loss.detach()):.4f} val MAE {mae:.4f} "
                 f"({np.mean(step_seconds[-cfg.eval_every:]):.2f} s/step)")
@@ -259,7 +288,8 @@ def split_loss(model: UNet, split: Split, spec: RunSpec, cfg: TrainConfig) -> fl
     for i in range(len(split)):
         b = {"aif": split.aif[i : i + 1], "bokeh": split.bokeh[i : i + 1], "focus": split.focus[i : i + 1],
              "blur": split.blur[i : i + 1], **{k: v[i : i + 1] for k, v in extra.items()}}
-        total += float(image_loss(layer, spec.loss, cfg, b, torch.from_numpy(predict(model, b["aif"])))[0])
+        pred = predict(model, cfg.input_of(b["aif"], b["bokeh"]))
+        total += float(image_loss(layer, spec.loss, cfg, b, torch.from_numpy(pred))[0])
     return total / max(len(split), 1)
 
 
@@ -275,7 +305,7 @@ def train_logged(spec: RunSpec, splits: Dict[str, Split], cfg: TrainConfig, out_
 
 
 def load_model(run_dir: Path, cfg: TrainConfig) -> UNet:
-    model = UNet(cfg.base)
+    model = UNet(cfg.base, cfg.in_channels)
     model.load_state_dict(torch.load(run_dir / "model.pt", weights_only=True))
     return model
 

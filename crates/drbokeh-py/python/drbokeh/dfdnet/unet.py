@@ -21,13 +21,14 @@ def _block(cin: int, cout: int) -> nn.Sequential:
 
 
 class UNet(nn.Module):
-    """Encoder widths ``base * (1, 2, 4, 8, 16)``; ``base=12`` has about 1.1 M parameters, ``base=16`` 1.9 M."""
+    """Encoder widths ``base * (1, 2, 4, 8, 16)``; ``base=12`` has about 1.1 M parameters, ``base=16`` 1.9 M.
+    ``in_channels``: 3 for the all-in-focus image, 6 with the defocused image beside it."""
 
-    def __init__(self, base: int = 16) -> None:
+    def __init__(self, base: int = 16, in_channels: int = 3) -> None:
         super().__init__()
         widths = [base * m for m in (1, 2, 4, 8, 16)]
         self.down = nn.ModuleList()
-        cin = 3
+        cin = in_channels
         for c in widths:
             self.down.append(_block(cin, c))
             cin = c
