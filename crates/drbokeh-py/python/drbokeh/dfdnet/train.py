@@ -30,16 +30,6 @@ HIGHLIGHTS = ("none", "reach", "energy", "energy+reach")
 INPUTS = ("aif", "aif+bokeh")
 
 
-def network_input(aif: np.ndarray, bokeh: np.ndarray, inputs: str) -> np.ndarray:
-    """The network's input ``(N, C, H, W)`` for ``inputs`` (:data:`INPUTS`): ``aif``, or
-    ``aif`` and ``bokeh`` stacked along the channels."""
-    if inputs == "aif":
-        return aif
-    if inputs == "aif+bokeh":
-        return np.concatenate([aif, bokeh], 1)
-    raise ValueError(f"unknown network input {inputs!r} (available: {', '.join(INPUTS)})")
-
-
 @dataclass(frozen=True)
 class RunSpec:
     """``layer`` is a rendering layer (``layers.LAYERS``) or ``supervised``; ``loss`` one of
@@ -131,8 +121,9 @@ class TrainConfig:
         return 3 if self.inputs == "aif" else 6
 
     def input_of(self, aif: np.ndarray, bokeh: np.ndarray) -> np.ndarray:
-        """:func:`network_input` with this configuration's ``inputs``."""
-        return network_input(aif, bokeh, self.inputs)
+        """The network's input ``(N, C, H, W)``: ``aif``, or with ``aif+bokeh`` ``aif`` and
+        ``bokeh`` stacked along the channels (``inputs`` is checked on construction)."""
+        return aif if self.inputs == "aif" else np.concatenate([aif, bokeh], 1)
 
 
 def new_model(cfg: TrainConfig) -> UNet:
