@@ -256,7 +256,7 @@ def test_data_cache_is_shared_safely_and_a_damaged_one_is_a_one_line_error(tmp_p
         assert message.startswith("--data: ") and "splits.json" in message and "\n" not in message
 
 
-@pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"]])
+@pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"], ["table"]])
 def test_every_help_teaches_with_examples(cmd, capsys):
     """`--help` of the program and of each command prints its description and examples
     that name that command (the CLI's rule: help that teaches)."""
@@ -571,6 +571,73 @@ def test_the_network_can_see_the_defocused_image_too(tmp_path):
     res = evaluate(tmp_path, splits, [RunSpec("gausspsf", "l1g")], TrainConfig(base=4), html_scenes=1)
     rows = {row["run"]: row for row in res["rows"]}
     assert rows["gausspsf-l1g"]["mae"] == pytest.approx(float(np.abs(pred - test.disparity).mean()), abs=1e-6)
+
+
+def _seed_dir(root, seed: int, steps: int = 2, runs=("gausspsf-l1g", "aperture-l1g", "supervised")):
+    """Tiny runs trained with ``seed`` into ``root/s<seed>``, evaluated there."""
+    from drbokeh.dfdnet.evaluate import evaluate
+    from drbokeh.dfdnet.train import TrainConfig, parse_run, train_run
+
+    out = root / f"s{seed}-{steps}"
+    splits = {"train": _tiny_split(1), "val": _tiny_split(2, 2), "test": _tiny_split(3, 2)}
+    cfg = TrainConfig(steps=steps, batch=2, crop=32, base=4, eval_every=1, seed=seed)
+    specs = [parse_run(r) for r in runs]
+    for spec in specs:
+        train_run(spec, splits, cfg, out, log=lambda m: None)
+    evaluate(out, splits, specs, cfg, html_scenes=1)
+    return out
+
+
+def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(tmp_path, capsys):
+    """``table DIR... -o OUT``: per run the MAE of each seed as its eval wrote it, their mean
+    and spread, the wins among the layer runs (supervised not counted); directories that
+    differ in more than the seed, repeat a seed, lack results or predate recorded seeds get
+    a one-line error naming the directory and the difference."""
+    from drbokeh.dfdnet.__main__ import main
+
+    d1, d2 = _seed_dir(tmp_path, 1), _seed_dir(tmp_path, 2)
+    assert main(["table", str(d1), str(d2), "-o", str(tmp_path / "T")]) == 0
+    table = json.loads((tmp_path / "T" / "results.json").read_text())
+    assert table["seeds"] == [1, 2]
+    evals = [{r["run"]: r for r in json.loads((d / "results.json").read_text())["rows"]} for d in (d1, d2)]
+    rows = {r["run"]: r for r in table["rows"]}
+    assert set(rows) >= {"gausspsf-l1g", "aperture-l1g", "supervised", "constant (true median, oracle)"}
+    for name, row in rows.items():
+        assert row["mae"] == [e[name]["mae"] for e in evals]
+        assert row["mae_mean"] == pytest.approx(np.mean(row["mae"]))
+        assert row["mae_min"] <= row["mae_mean"] <= row["mae_max"]
+    assert rows["supervised"]["wins"] is None
+    layer_runs = ("gausspsf-l1g", "aperture-l1g")
+    assert sum(rows[n]["wins"] for n in layer_runs) == 2
+    for i, e in enumerate(evals):
+        winner = min(layer_runs, key=lambda n: e[n]["mae"])
+        assert rows[winner]["wins"] >= 1
+    md = (tmp_path / "T" / "results.md").read_text()
+    best = min(layer_runs, key=lambda n: rows[n]["mae_mean"])
+    assert f"**{rows[best]['mae_mean']:.4f}**" in md and "MAE seed 1" in md and "MAE seed 2" in md
+
+    def refused(*dirs):
+        with pytest.raises(SystemExit) as info:
+            main(["table", *map(str, dirs), "-o", str(tmp_path / "X")])
+        message = str(info.value.code)
+        assert message.startswith("error: ") and "\n" not in message
+        assert not (tmp_path / "X").exists()  # nothing written
+        return message
+
+    other_steps = _seed_dir(tmp_path, 3, steps=3)
+    assert "steps (3 against 2)" in refused(d1, other_steps) and str(other_steps) in refused(d1, other_steps)
+    assert "repeat a seed" in refused(d1, d1)
+    assert "at least two" in refused(d1)
+    assert "results.json: not found" in refused(d1, tmp_path / "nowhere")
+    old = tmp_path / "old"
+    old.mkdir()
+    res = json.loads((d2 / "results.json").read_text())
+    for r in res["rows"]:
+        r.pop("seed", None)
+    (old / "results.json").write_text(json.dumps(res))
+    assert "run eval there again" in refused(d1, old)
+    (old / "results.json").write_text("{")
+    assert "not readable as JSON" in refused(d1, old)
 
 
 def test_quick_data_is_far_focus_only(quick_run):

@@ -9,6 +9,8 @@ disparity is used only to evaluate. Protocol and results: docs/dfdnet.md.
              DIR/results.json (loss first/last, test MAE trained vs untrained)
   eval       the test table (results.md/.json), index.html with test images, plots/*.svg
   reproduce  train the whole table, then eval (the one command behind the table)
+  table      one table over several seeds: the eval outputs of one protocol run with
+             other --seed values, per run the MAE of each seed, mean, spread and wins
 """
 
 from __future__ import annotations
@@ -225,7 +227,8 @@ EXAMPLES = {
     "main": """examples:
   python -m drbokeh.dfdnet train --quick --out q        # a few minutes: tiny data, 40 steps
   python -m drbokeh.dfdnet reproduce --data D --out R   # the whole table (about 45 min on 2 cores)
-  python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim,gausspsf-hssim --seed 18""",
+  python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim,gausspsf-hssim --seed 18
+  python -m drbokeh.dfdnet table R17 R18 R19 -o T       # one table over three seeds' eval outputs""",
     "train": """examples:
   python -m drbokeh.dfdnet train --quick --out q
   python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim,gausspsf-hssim
@@ -239,6 +242,17 @@ and DIR/RUN/log.json; the data is traced into --data (default DIR/data) once and
 
 Evaluates the runs trained in DIR on the test split: DIR/results.md and results.json,
 DIR/index.html with the test images, DIR/plots/*.svg (loss curves, validation MAE).""",
+    "table": """examples:
+  python -m drbokeh.dfdnet table R17 R18 R19 -o T     # R17..R19: eval outputs of seeds 17-19
+  python -m drbokeh.dfdnet table P17 P18 -o T2         # two seeds are enough to run it
+
+Each DIR is what `eval --out DIR --seed N` wrote for one seed N of the same protocol.
+
+Reads each DIR/results.json (and config.json), checks that they differ only in the seed
+(test scenes, each run's training settings, data), and writes OUT/results.md and
+results.json: per run the test MAE at every seed, the mean, the spread (min-max), at how
+many seeds it was the lowest of the runs trained through a rendering layer, and the means
+of RMSE, delta < 1.25, MAE bg/fg and s/epoch.""",
     "reproduce": """examples:
   python -m drbokeh.dfdnet reproduce --data D --out R
   python -m drbokeh.dfdnet reproduce --data D --out R --seed 19
@@ -270,7 +284,14 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     _common(r)
     r.add_argument("--retrain", action="store_true", help=RETRAIN_HELP)
     r.add_argument("--note", help=NOTE_HELP)
+    tb = sub.add_parser("table", help="one table over several seeds' eval outputs",
+                        description="One test table over the eval outputs of several seeds.",
+                        epilog=EXAMPLES["table"], formatter_class=raw)
+    tb.add_argument("dirs", nargs="+", type=Path, metavar="DIR", help="eval output directories, one per --seed")
+    tb.add_argument("-o", "--output", "--out", dest="out", required=True, type=Path, help="output directory")
     a = ap.parse_args(argv)
+    if a.cmd == "table":
+        return a
     quick = a.cmd == "train" and a.quick
     if quick and a.size == SIZE:
         a.size = QUICK_SIZE
@@ -280,6 +301,16 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
 
 def main(argv: Optional[List[str]] = None) -> int:
     a = parse_args(argv)
+    if a.cmd == "table":
+        from .seeds import SeedTableError, write_table
+
+        try:
+            write_table(a.dirs, a.out)
+        except SeedTableError as e:
+            raise SystemExit(f"error: {e}") from None
+        _log(f"wrote {a.out / 'results.md'}")
+        print((a.out / "results.md").read_text())
+        return 0
     if a.cmd == "train" and a.quick:
         _quick(a)
         return 0

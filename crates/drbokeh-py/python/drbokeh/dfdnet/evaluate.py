@@ -129,6 +129,9 @@ def evaluate(
             "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),
             "seconds_per_step": log["seconds_per_step"], "seconds_per_epoch": log["seconds_per_epoch"],
             "epochs": log["epochs"], "steps": log["config"]["steps"],
+            # How the run was trained (its log), so that tables over seeds can check that
+            # only the seed differs (``seeds.py``).
+            "seed": start.seed, "train_config": log["config"],
         })
     # The untrained row is the start the runs trained from (their seed, width and initial
     # disparity, from their logs) when they share one, so that runs trained with --seed 18

@@ -1,0 +1,157 @@
+"""One table over several run seeds: ``python -m drbokeh.dfdnet table DIR... -o OUT``.
+
+Each ``DIR`` is an ``eval`` output (its ``results.json``) of the same protocol with another
+``--seed``. A single seed cannot rank layers whose differences are as small as one layer's
+spread over seeds (docs/dfdnet.md, sessions 12-17), so the table shows, per run, the MAE of
+every seed, their mean and spread, how often the run had the lowest MAE among the runs
+trained through a rendering layer, and the means of the other metrics. The directories
+must agree on everything but the seed (test scenes, data, training settings); otherwise
+the table would mix protocols, and it is refused with the first difference named.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+# Rows of an eval table that are references, not trained through a layer.
+REFERENCE_LAYERS = ("supervised", "-")
+# Metrics averaged over the seeds (results.json row keys) and their column names.
+MEAN_COLUMNS = (("rmse", "RMSE"), ("delta125", "delta<1.25"), ("mae_bg", "MAE bg"), ("mae_fg", "MAE fg"),
+                ("seconds_per_epoch", "s/epoch"))
+
+
+class SeedTableError(ValueError):
+    """The directories cannot be put in one table (missing, damaged or of other protocols)."""
+
+
+# Settings that may differ between the directories: the seed (the point of the table) and
+# the thread count (how fast, not what is trained).
+FREE_SETTINGS = ("seed", "threads")
+
+
+def _read_json(path: Path, what: str) -> Dict[str, object]:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise SeedTableError(f"{path}: not found ({what})") from None
+    except (OSError, ValueError) as e:
+        raise SeedTableError(f"{path}: not readable as JSON ({type(e).__name__}: {e})") from None
+
+
+def _differs(a: Dict[str, object], b: Dict[str, object]) -> Optional[str]:
+    """The first setting (outside :data:`FREE_SETTINGS`) whose value differs, with both values."""
+    for key in sorted(set(a) | set(b)):
+        if key not in FREE_SETTINGS and a.get(key) != b.get(key):
+            return f"{key} ({b.get(key)!r} against {a.get(key)!r})"
+    return None
+
+
+def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
+    """Each directory's ``results.json`` (and the training record ``config.json``, where
+    ``train`` wrote one), checked to be of one protocol that differs only in the seed: the
+    same test scenes, each run trained with the same settings (its log's, as ``eval``
+    records them) but the seed, the same data where both directories record it; and
+    distinct seeds."""
+    if len(dirs) < 2:
+        raise SeedTableError("table: give at least two eval directories (one per seed)")
+    out = []
+    for d in dirs:
+        p = Path(d) / "results.json"
+        r = _read_json(p, "run `python -m drbokeh.dfdnet eval` there first")
+        rows = r.get("rows")
+        if not isinstance(rows, list) or not all(isinstance(x, dict) and "run" in x and "mae" in x for x in rows):
+            raise SeedTableError(f"{p}: not an eval results file (no rows with a run and its MAE)")
+        c = Path(d) / "config.json"
+        r["training"] = _read_json(c, "") if c.exists() else None
+        r["dir"] = str(d)
+        out.append(r)
+    for r in out:
+        found = {row["seed"] for row in r["rows"] if isinstance(row, dict) and "seed" in row}  # type: ignore[union-attr]
+        if len(found) != 1:
+            raise SeedTableError(f"{r['dir']}/results.json: " + (
+                "its runs were trained with different seeds" if found else
+                "no run records its seed (written before seeds were recorded: run eval there again)"))
+        r["seed"] = found.pop()
+    first = out[0]
+    seeds = [r["seed"] for r in out]
+    if len(set(seeds)) != len(seeds):
+        raise SeedTableError(f"table: the directories repeat a seed ({seeds}); each must be another --seed")
+    first_runs = {row["run"]: row for row in first["rows"] if "train_config" in row}  # type: ignore[union-attr]
+    for r in out[1:]:
+        where = f"table: {r['dir']} differs from {first['dir']} in"
+        if first.get("test_scenes") != r.get("test_scenes"):
+            raise SeedTableError(f"{where} its test scenes")
+        for row in r["rows"]:  # type: ignore[union-attr]
+            if row["run"] in first_runs and "train_config" in row:
+                diff = _differs(first_runs[row["run"]]["train_config"], row["train_config"])
+                if diff:
+                    raise SeedTableError(f"{where} how {row['run']} was trained: {diff}")
+        if first["training"] is not None and r["training"] is not None:
+            for key in ("splits", "min_blur_px"):
+                if first["training"].get(key) != r["training"].get(key):  # type: ignore[union-attr]
+                    raise SeedTableError(f"{where} its data ({key} in config.json)")
+    return out
+
+
+def combine(results: Sequence[Dict[str, object]]) -> Dict[str, object]:
+    """Per run (in the first directory's order; runs missing from a seed are left out):
+    MAE per seed, mean, min/max, wins among the layer runs, and the means of
+    :data:`MEAN_COLUMNS`."""
+    seeds = [int(r["seed"]) for r in results]  # type: ignore[call-overload]
+    by_seed = [{row["run"]: row for row in r["rows"]} for r in results]  # type: ignore[union-attr]
+    names = [row["run"] for row in results[0]["rows"] if all(row["run"] in s for s in by_seed)]  # type: ignore[union-attr]
+    layer_runs = [n for n in names if by_seed[0][n]["layer"] not in REFERENCE_LAYERS]
+    winners = [min(layer_runs, key=lambda n: s[n]["mae"]) if layer_runs else None for s in by_seed]
+    rows = []
+    for n in names:
+        maes = [float(s[n]["mae"]) for s in by_seed]
+        row = {"run": n, "layer": by_seed[0][n]["layer"], "loss": by_seed[0][n]["loss"], "mae": maes,
+               "mae_mean": float(np.mean(maes)), "mae_min": min(maes), "mae_max": max(maes),
+               "wins": sum(w == n for w in winners) if n in layer_runs else None}
+        for key, _ in MEAN_COLUMNS:
+            vals = [s[n].get(key) for s in by_seed]
+            row[key] = float(np.mean(vals)) if all(isinstance(v, (int, float)) for v in vals) else None
+        rows.append(row)
+    return {"seeds": seeds, "dirs": [r["dir"] for r in results], "rows": rows,
+            "test_scenes": len(results[0].get("test_scenes", []))}  # type: ignore[arg-type]
+
+
+def _f(v: object, digits: int = 4) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"  # type: ignore[str-format]
+
+
+def markdown(table: Dict[str, object]) -> str:
+    seeds: List[int] = table["seeds"]  # type: ignore[assignment]
+    rows: List[Dict[str, object]] = table["rows"]  # type: ignore[assignment]
+    layered = [r for r in rows if r["wins"] is not None]
+    best = min(layered, key=lambda r: r["mae_mean"])["run"] if layered else None
+    head = ["run", "layer", "loss"] + [f"MAE seed {s}" for s in seeds] + ["MAE mean", "min-max", "lowest (of layers)"]
+    head += [name + " (mean)" for _, name in MEAN_COLUMNS]
+    lines = ["# drbokeh.dfdnet: test table over seeds", "",
+             f"Seeds {', '.join(map(str, seeds))} ({', '.join(table['dirs'])}); {table['test_scenes']} test scenes; "  # type: ignore[arg-type]
+             "every setting but the seed is the same in each directory. \"lowest\": at how many seeds the run had the "
+             "lowest MAE among the runs trained through a rendering layer (the supervised and reference rows are not "
+             "counted). The mean with the lowest value among the layer runs is in bold.", "",
+             "| " + " | ".join(head) + " |",
+             "| --- | --- | --- | " + " | ".join("---:" for _ in head[3:]) + " |"]
+    for r in rows:
+        mean = _f(r["mae_mean"])
+        cells = [str(r["run"]), str(r["layer"]), str(r["loss"])] + [_f(v) for v in r["mae"]]  # type: ignore[union-attr]
+        cells += [f"**{mean}**" if r["run"] == best else mean, f"{_f(r['mae_min'])}-{_f(r['mae_max'])}",
+                  "-" if r["wins"] is None else f"{r['wins']} of {len(seeds)}"]
+        cells += [_f(r[key], 3 if key == "delta125" else (1 if key == "seconds_per_epoch" else 4)) for key, _ in MEAN_COLUMNS]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_table(dirs: Sequence[Path], out_dir: Path) -> Dict[str, object]:
+    """Writes ``out_dir/results.md`` and ``results.json`` (see the module docs); returns the table."""
+    table = combine(load_results(dirs))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "results.md").write_text(markdown(table))
+    (out_dir / "results.json").write_text(json.dumps(table, indent=1))
+    return table
