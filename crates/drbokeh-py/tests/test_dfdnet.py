@@ -571,6 +571,8 @@ def test_the_network_can_see_the_defocused_image_too(tmp_path):
     res = evaluate(tmp_path, splits, [RunSpec("gausspsf", "l1g")], TrainConfig(base=4), html_scenes=1)
     rows = {row["run"]: row for row in res["rows"]}
     assert rows["gausspsf-l1g"]["mae"] == pytest.approx(float(np.abs(pred - test.disparity).mean()), abs=1e-6)
+    assert rows["gausspsf-l1g"]["train_config"]["inputs"] == "aif+bokeh"
+    assert "networks see the all-in-focus and the defocused image" in (tmp_path / "index.html").read_text()
 
 
 def _seed_dir(root, seed: int, steps: int = 2, runs=("gausspsf-l1g", "aperture-l1g", "supervised")):

@@ -222,11 +222,15 @@ def _html(out_dir: Path, test: Split, preds: Dict[str, np.ndarray], rows: List[D
             cells.append(f'<td><img src="html/{fname}" width="{2 * img.shape[1]}">{cap}</td>')
         body.append(f"<tr><td>{escape(name)}<br><small>K {test.blur[i]:.1f} px</small></td>{''.join(cells)}</tr>")
     table = (out_dir / "results.md").read_text()
+    seen = {"aif": "the all-in-focus image (aif) only", "aif+bokeh": "the all-in-focus and the defocused image (aif and bokeh)"}
+    inputs = sorted({str(r["train_config"].get("inputs", "aif")) for r in rows if isinstance(r.get("train_config"), dict)})  # type: ignore[union-attr]
+    sees = "; ".join(seen.get(i, i) for i in inputs) or seen["aif"]
     page = (
         "<!doctype html><meta charset='utf-8'><title>drbokeh.dfdnet test images</title>"
         "<style>body{font-family:sans-serif} td,th{padding:2px;text-align:center;vertical-align:top}</style>"
         "<h1>Depth networks trained through rendering layers: test images</h1>"
-        "<p>Disparity: white = near (1), black = far (0). Numbers under predictions: the scene's MAE.</p>"
+        f"<p>The networks see {escape(sees)}; bokeh is the ray-traced target of the self-supervised loss. "
+        "Disparity: white = near (1), black = far (0). Numbers under predictions: the scene's MAE.</p>"
         f"<table><tr><th>scene</th>{head}</tr>{''.join(body)}</table>"
         f"<h2>Table</h2><pre>{escape(table)}</pre>"
         "<h2>Curves</h2><img src='plots/loss_relative.svg'><img src='plots/val_mae.svg'>"
