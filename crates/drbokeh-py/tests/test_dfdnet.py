@@ -642,6 +642,35 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
     assert "not readable as JSON" in refused(d1, old)
 
 
+def test_reproduce_over_seeds_is_one_command(tmp_path):
+    """``reproduce --seeds 1,2``: the table at each seed in OUT/seed<S> from one data cache,
+    each run trained with its directory's seed, then the table over the seeds in OUT, the
+    same as ``table`` makes of the two directories. Tiny scenes (32 px, 4 spp), 2 steps."""
+    env = dict(os.environ, DRBOKEH_CLI=str(_find_cli()))
+    out = tmp_path / "R"
+    args = ["--size", "32", "--spp", "4", "--train-scenes", "8", "--val-scenes", "8", "--test-scenes", "8",
+            "--steps", "2", "--batch", "2", "--base", "4", "--jobs", "1", "--background-detail", "0",
+            "--runs", "gausspsf-l1g,aperture-l1g"]
+    p = subprocess.run([sys.executable, "-m", "drbokeh.dfdnet", "reproduce", "--out", str(out), "--seeds", "1,2", *args],
+                       capture_output=True, text=True, env=env, timeout=600)
+    assert p.returncode == 0, p.stderr + p.stdout
+    assert (out / "data").is_dir() and not (out / "seed1" / "data").exists()
+    for seed in (1, 2):
+        log = json.loads((out / f"seed{seed}" / "gausspsf-l1g" / "log.json").read_text())
+        assert log["config"]["seed"] == seed
+    table = json.loads((out / "results.json").read_text())
+    assert table["seeds"] == [1, 2]
+    from drbokeh.dfdnet.seeds import combine, load_results
+
+    again = combine(load_results([out / "seed1", out / "seed2"]))
+    assert again["rows"] == table["rows"]
+    from drbokeh.dfdnet.__main__ import parse_args
+
+    for bad in ("1", "1,1", "a,b"):
+        with pytest.raises(SystemExit):
+            parse_args(["reproduce", "--out", "o", "--seeds", bad])
+
+
 def test_quick_data_is_far_focus_only(quick_run):
     """Every kept scene focuses on the background (disparity 0, the farthest), so
     d = disparity - focus >= 0."""

@@ -63,6 +63,17 @@ def _min_blur_arg(text: str) -> float:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _seeds_arg(text: str) -> List[int]:
+    """``--seeds 17,18,19``: at least two distinct integers."""
+    try:
+        seeds = [int(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers, e.g. 17,18,19") from None
+    if len(seeds) < 2 or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected at least two distinct seeds (for one, use --seed)")
+    return seeds
+
+
 def _resolve(a: argparse.Namespace, quick: bool) -> None:
     """Fills the options left unset with the table's values, or --quick's."""
     table = {"steps": TrainConfig.steps, "batch": TrainConfig.batch, "crop": a.size,
@@ -186,6 +197,36 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
     del res
 
 
+def _write_table(dirs: List[Path], out: Path) -> None:
+    from .seeds import SeedTableError, write_table
+
+    try:
+        write_table(dirs, out)
+    except SeedTableError as e:
+        raise SystemExit(f"error: {e}") from None
+    _log(f"wrote {out / 'results.md'}")
+    print((out / "results.md").read_text())
+
+
+def _reproduce_seeds(a: argparse.Namespace) -> None:
+    """``reproduce --seeds``: the table at each seed into OUT/seed<S> (one data cache), then
+    the table over the seeds in OUT."""
+    dirs = []
+    for seed in a.seeds:
+        b = _namespace_with(a, seed=seed, out=a.out / f"seed{seed}", data=a.data or a.out / "data")
+        runs, cfg = _runs(b), _cfg(b)
+        _log(f"seed {seed}: {b.out}")
+        _train(b, runs, cfg)
+        _eval(b, runs, cfg)
+        dirs.append(b.out)
+    _write_table(dirs, a.out)
+
+
+def _namespace_with(a: argparse.Namespace, **changes: object) -> argparse.Namespace:
+    """A copy of ``a`` with ``changes``."""
+    return argparse.Namespace(**{**vars(a), **changes})
+
+
 def _quick(a: argparse.Namespace) -> None:
     """Tiny data (64 px, far focus as the table), a few steps of drbokeh ``physical``."""
     specs = [SplitSpec("train", 1711, 64, a.size, a.spp, a.focus, a.background_detail),
@@ -256,6 +297,7 @@ of RMSE, delta < 1.25, MAE bg/fg and s/epoch.""",
     "reproduce": """examples:
   python -m drbokeh.dfdnet reproduce --data D --out R
   python -m drbokeh.dfdnet reproduce --data D --out R --seed 19
+  python -m drbokeh.dfdnet reproduce --data D --out R --seeds 17,18,19   # R/seed17..19, R/results.md
 
 Traces the data if --data lacks it, trains every run of the table (--jobs at once), then
 evaluates: the one command behind docs/dfdnet.md's table.""",
@@ -284,6 +326,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     _common(r)
     r.add_argument("--retrain", action="store_true", help=RETRAIN_HELP)
     r.add_argument("--note", help=NOTE_HELP)
+    r.add_argument("--seeds", type=_seeds_arg, metavar="S,S,...",
+                   help="the whole table at each seed (instead of --seed) into OUT/seed<S>, sharing the data, "
+                        "then one table over them in OUT (as the table command)")
     tb = sub.add_parser("table", help="one table over several seeds' eval outputs",
                         description="One test table over the eval outputs of several seeds.",
                         epilog=EXAMPLES["table"], formatter_class=raw)
@@ -302,17 +347,13 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
 def main(argv: Optional[List[str]] = None) -> int:
     a = parse_args(argv)
     if a.cmd == "table":
-        from .seeds import SeedTableError, write_table
-
-        try:
-            write_table(a.dirs, a.out)
-        except SeedTableError as e:
-            raise SystemExit(f"error: {e}") from None
-        _log(f"wrote {a.out / 'results.md'}")
-        print((a.out / "results.md").read_text())
+        _write_table(a.dirs, a.out)
         return 0
     if a.cmd == "train" and a.quick:
         _quick(a)
+        return 0
+    if a.cmd == "reproduce" and a.seeds:
+        _reproduce_seeds(a)
         return 0
     runs, cfg = _runs(a), _cfg(a)
     if a.cmd in ("train", "reproduce"):
