@@ -618,6 +618,12 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
     best = min(layer_runs, key=lambda n: rows[n]["mae_mean"])
     assert f"**{rows[best]['mae_mean']:.4f}**" in md and "MAE seed 1" in md and "MAE seed 2" in md
 
+    d3 = _seed_dir(tmp_path, 3, runs=("gausspsf-l1g", "supervised"))
+    assert main(["table", str(d1), str(d3), "-o", str(tmp_path / "T3")]) == 0
+    t3 = json.loads((tmp_path / "T3" / "results.json").read_text())
+    assert "aperture-l1g" not in {r["run"] for r in t3["rows"]} and t3["left_out"] == ["aperture-l1g"]
+    assert "Left out (not evaluated in every directory): aperture-l1g." in (tmp_path / "T3" / "results.md").read_text()
+
     def refused(*dirs):
         with pytest.raises(SystemExit) as info:
             main(["table", *map(str, dirs), "-o", str(tmp_path / "X")])
@@ -626,7 +632,7 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
         assert not (tmp_path / "X").exists()  # nothing written
         return message
 
-    other_steps = _seed_dir(tmp_path, 3, steps=3)
+    other_steps = _seed_dir(tmp_path, 4, steps=3)
     assert "steps (3 against 2)" in refused(d1, other_steps) and str(other_steps) in refused(d1, other_steps)
     assert "repeat a seed" in refused(d1, d1)
     assert "at least two" in refused(d1)

@@ -116,7 +116,8 @@ def combine(results: Sequence[Dict[str, object]]) -> Dict[str, object]:
             vals = [s[n].get(key) for s in by_seed]
             row[key] = float(np.mean(vals)) if all(isinstance(v, (int, float)) for v in vals) else None
         rows.append(row)
-    return {"seeds": seeds, "dirs": [r["dir"] for r in results], "rows": rows,
+    partial = sorted({row["run"] for r in results for row in r["rows"]} - set(names))  # type: ignore[union-attr]
+    return {"seeds": seeds, "dirs": [r["dir"] for r in results], "rows": rows, "left_out": partial,
             "test_scenes": len(results[0].get("test_scenes", []))}  # type: ignore[arg-type]
 
 
@@ -138,6 +139,9 @@ def markdown(table: Dict[str, object]) -> str:
              "counted). The mean with the lowest value among the layer runs is in bold.", "",
              "| " + " | ".join(head) + " |",
              "| --- | --- | --- | " + " | ".join("---:" for _ in head[3:]) + " |"]
+    left_out: List[str] = table.get("left_out", [])  # type: ignore[assignment]
+    if left_out:
+        lines[4:4] = [f"Left out (not evaluated in every directory): {', '.join(left_out)}.", ""]
     for r in rows:
         mean = _f(r["mae_mean"])
         cells = [str(r["run"]), str(r["layer"]), str(r["loss"])] + [_f(v) for v in r["mae"]]  # type: ignore[union-attr]
