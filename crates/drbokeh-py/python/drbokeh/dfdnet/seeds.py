@@ -35,11 +35,14 @@ FREE_SETTINGS = ("seed", "threads")
 
 def _read_json(path: Path, what: str) -> Dict[str, object]:
     try:
-        return json.loads(path.read_text())
+        value = json.loads(path.read_text())
     except FileNotFoundError:
         raise SeedTableError(f"{path}: not found ({what})") from None
     except (OSError, ValueError) as e:
         raise SeedTableError(f"{path}: not readable as JSON ({type(e).__name__}: {e})") from None
+    if not isinstance(value, dict):
+        raise SeedTableError(f"{path}: expected a JSON object, found a {type(value).__name__} ({what})")
+    return value
 
 
 def _differs(a: Dict[str, object], b: Dict[str, object]) -> Optional[str]:
@@ -61,12 +64,15 @@ def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
     out = []
     for d in dirs:
         p = Path(d) / "results.json"
-        r = _read_json(p, "run `python -m drbokeh.dfdnet eval` there first")
+        r = _read_json(p, "eval results: run `python -m drbokeh.dfdnet eval` there first")
         rows = r.get("rows")
-        if not isinstance(rows, list) or not all(isinstance(x, dict) and "run" in x and "mae" in x for x in rows):
+        if not isinstance(rows, list) or not all(
+            isinstance(x, dict) and isinstance(x.get("run"), str) and isinstance(x.get("mae"), (int, float))
+            and isinstance(x.get("seed", 0), int) for x in rows
+        ):
             raise SeedTableError(f"{p}: not an eval results file (no rows with a run and its MAE)")
         c = Path(d) / "config.json"
-        r["training"] = _read_json(c, "") if c.exists() else None
+        r["training"] = _read_json(c, "training record written by train") if c.exists() else None
         r["dir"] = str(d)
         out.append(r)
     for r in out:
