@@ -648,9 +648,11 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
     assert "not readable as JSON" in refused(d1, old)
     (old / "results.json").write_text("[]")
     assert "results.json: expected a JSON object, found a list" in refused(d1, old)
-    res["rows"][0]["mae"] = "0.1"
-    (old / "results.json").write_text(json.dumps(res))
-    assert "not an eval results file" in refused(d1, old)
+    for key, bad in (("mae", "0.1"), ("layer", None), ("train_config", [])):
+        broken = json.loads(json.dumps(res))
+        broken["rows"][0][key] = bad
+        (old / "results.json").write_text(json.dumps(broken))
+        assert "not an eval results file" in refused(d1, old)
 
 
 def test_reproduce_over_seeds_is_one_command(tmp_path):

@@ -53,6 +53,13 @@ def _differs(a: Dict[str, object], b: Dict[str, object]) -> Optional[str]:
     return None
 
 
+def _row_ok(row: object) -> bool:
+    """Whether a results.json row has what the table reads, with the types ``eval`` writes."""
+    return (isinstance(row, dict) and all(isinstance(row.get(k), str) for k in ("run", "layer", "loss"))
+            and isinstance(row.get("mae"), (int, float)) and isinstance(row.get("seed", 0), int)
+            and isinstance(row.get("train_config", {}), dict))
+
+
 def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
     """Each directory's ``results.json`` (and the training record ``config.json``, where
     ``train`` wrote one), checked to be of one protocol that differs only in the seed: the
@@ -66,22 +73,18 @@ def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
         p = Path(d) / "results.json"
         r = _read_json(p, "eval results: run `python -m drbokeh.dfdnet eval` there first")
         rows = r.get("rows")
-        if not isinstance(rows, list) or not all(
-            isinstance(x, dict) and isinstance(x.get("run"), str) and isinstance(x.get("mae"), (int, float))
-            and isinstance(x.get("seed", 0), int) for x in rows
-        ):
-            raise SeedTableError(f"{p}: not an eval results file (no rows with a run and its MAE)")
+        if not isinstance(rows, list) or not all(_row_ok(x) for x in rows):
+            raise SeedTableError(f"{p}: not an eval results file (rows need a run, layer, loss and MAE)")
+        found = {row["seed"] for row in rows if "seed" in row}
+        if len(found) != 1:
+            raise SeedTableError(f"{p}: " + (
+                "its runs were trained with different seeds" if found else
+                "no run records its seed (written before seeds were recorded: run eval there again)"))
         c = Path(d) / "config.json"
         r["training"] = _read_json(c, "training record written by train") if c.exists() else None
         r["dir"] = str(d)
-        out.append(r)
-    for r in out:
-        found = {row["seed"] for row in r["rows"] if isinstance(row, dict) and "seed" in row}  # type: ignore[union-attr]
-        if len(found) != 1:
-            raise SeedTableError(f"{r['dir']}/results.json: " + (
-                "its runs were trained with different seeds" if found else
-                "no run records its seed (written before seeds were recorded: run eval there again)"))
         r["seed"] = found.pop()
+        out.append(r)
     first = out[0]
     seeds = [r["seed"] for r in out]
     if len(set(seeds)) != len(seeds):
