@@ -407,6 +407,47 @@ def test_occlusion_layer_is_one_layer_at_a_constant_and_cuts_at_a_step():
     assert g[0, 0, 2:9, 2:9].sum() < 0  # the far side is pushed up, towards the target's 0.3
 
 
+def test_five_layer_stack_separates_more_depths():
+    """``physical5``: nested squares at four depths over a far background (each nearer one
+    inside the farther one, so every depth borders the next) are cut into at least three
+    front layers, where ``physical3`` keeps them all in one; every pixel is owned by one
+    layer, owned pixels carry the prediction's disparity, the stack is one layer at a
+    constant, and the disparity gradient flows to every depth."""
+    rng = np.random.default_rng(11)
+    aif = torch.from_numpy(rng.random((1, 3, 40, 40)).astype(np.float32) * 0.8 + 0.1)
+    f, k = torch.tensor([0.0]), torch.tensor([3.0])
+    const = torch.full((1, 1, 40, 40), 0.3)
+    one = layers.make_layer("physical")(aif, const, f, k)
+    assert torch.abs(one - layers.make_layer("physical5")(aif, const, f, k)).max() < 1e-6
+    steps = torch.full((1, 1, 40, 40), 0.05)
+    squares = [(0.3, 4), (0.5, 10), (0.7, 15), (0.95, 19)]  # (disparity, inset from the border)
+    for disp, inset in squares:
+        steps[..., inset : 40 - inset, inset : 40 - inset] = disp
+    front_layers = []
+    for n in (3, 5):
+        _, alpha, disp = layers.occlusion_stack(aif, steps, f, k, n)
+        assert alpha.shape == (1, n, 40, 40)
+        covers = (alpha[0] > 0.5).to(torch.int32)
+        owner = (covers > 0) & (torch.cumsum(covers, 0) - covers == 0)
+        assert torch.all(owner.sum(0) == 1)  # each pixel owned by exactly one layer
+        assert torch.allclose(disp[0][owner], steps[0, 0].expand(n, 40, 40)[owner])
+        layer_of = owner.to(torch.int64).argmax(0)
+        front_layers.append({int(layer_of[inset, 20]) for _, inset in squares[:3]})
+        assert int(layer_of[1, 1]) not in front_layers[-1]  # the background is its own layer
+    assert len(front_layers[0]) == 1 and len(front_layers[1]) == 3
+    d = steps.clone().requires_grad_(True)
+    out = layers.make_layer("physical5")(aif, d, f, k)
+    (g,) = torch.autograd.grad((out - one).abs().mean(), d)
+    assert torch.isfinite(g).all()
+    for i, (_, inset) in enumerate(squares):
+        ring = torch.zeros(40, 40, dtype=torch.bool)
+        ring[inset : 40 - inset, inset : 40 - inset] = True
+        if i + 1 < len(squares):
+            nxt = squares[i + 1][1]
+            ring[nxt : 40 - nxt, nxt : 40 - nxt] = False
+        assert g[0, 0][ring].abs().sum() > 0
+
+
 def test_movable_stack_keeps_the_render_and_adds_the_membership_gradient():
     """``physical3m``: the stack of ``physical3`` with the same alphas (but for the floor on
     the empty pixels of a layer that has a cut), the input's colour on those pixels, and an

@@ -27,6 +27,8 @@ import numpy as np
 
 from .data import FOCUS, Split, SplitSpec, check_min_blur, default_splits, prepare, with_min_blur
 from .evaluate import evaluate, metrics
+from .layers import LAYERS
+from .losses import LOSSES
 from .train import HIGHLIGHTS, INPUTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
 
 
@@ -124,8 +126,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--focus-prior", type=float, default=TrainConfig.w_focus, metavar="WEIGHT",
                    help="weight of a prior for the least defocus: WEIGHT x mean |disparity - focus| (default 0: off; docs/dfdnet.md)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
-    p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised); default: the table: "
-                   + ",".join(r.name for r in TABLE_RUNS))
+    p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised; layers: " + ", ".join(LAYERS)
+                   + "; losses: " + ", ".join(LOSSES) + "); default: the table: " + ",".join(r.name for r in TABLE_RUNS))
 
 
 def _specs(a: argparse.Namespace) -> List[SplitSpec]:

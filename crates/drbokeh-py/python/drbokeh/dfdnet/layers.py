@@ -9,6 +9,9 @@ the display-encoded defocused image ``(B, 3, H, W)``.
 - ``physical3``, ``paper3``: the same through the prediction's layer stack (up to 3
   depth layers, :func:`occlusion_stack`), so a blurred nearer object shows the filled-in
   background behind it.
+- ``physical5``, ``paper5``: the same stack with up to 5 depth layers, so that objects at
+  different depths in front of the background get their own layers (and occlude each
+  other) rather than sharing one.
 - ``physical3m``, ``paper3m``: the same stack with a layer assignment the loss can move
   (:func:`movable_assignment`).
 - ``gausspsf``: GaussPSF (Gur & Wolf 2019) as ``crates/drbokeh/src/baselines/gauss_psf.rs``:
@@ -282,7 +285,9 @@ def drbokeh_occlusion_layer(
     return render
 
 
-LAYERS = ("physical", "paper", "gausspsf", "aperture", "physical3", "paper3", "physical3m", "paper3m")
+LAYERS = (
+    "physical", "paper", "gausspsf", "aperture", "physical3", "paper3", "physical5", "paper5", "physical3m", "paper3m",
+)
 
 # The membership width of the movable stacks (``physical3m``, ``paper3m``), in disparity.
 # 0.1 against 0.05 at run seed 17 (the tuning seed), validation MAE at the last step 0.168
@@ -299,6 +304,9 @@ def make_layer(name: str, threads: int = 1) -> Layer:
         # the drbokeh layers through the prediction's layer stack (at most 3 depth layers)
         "physical3": lambda: drbokeh_occlusion_layer("physical", 3, threads),
         "paper3": lambda: drbokeh_occlusion_layer("paper", 3, threads),
+        # up to 5 depth layers (docs/dfdnet.md, session 19)
+        "physical5": lambda: drbokeh_occlusion_layer("physical", 5, threads),
+        "paper5": lambda: drbokeh_occlusion_layer("paper", 5, threads),
         # the same, with a layer assignment the loss can move (movable_assignment)
         "physical3m": lambda: drbokeh_occlusion_layer("physical", 3, threads, MOVABLE_WIDTH),
         "paper3m": lambda: drbokeh_occlusion_layer("paper", 3, threads, MOVABLE_WIDTH),
