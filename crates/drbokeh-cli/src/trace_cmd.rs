@@ -84,8 +84,9 @@ pub enum BenchmarkCommand {
 ///
 /// Each scene goes to DIR/scene_NNN (the same files as `drbokeh trace`); DIR/manifest.json
 /// lists every scene with its blur and focus. Scenes already present are skipped, so an
-/// interrupted run can be resumed; --shard k/n makes only scenes with index % n == k, so
-/// n machines can share the work (same seed, same bytes).
+/// interrupted run can be resumed with the same parameters (a DIR made with others is
+/// refused: every scene's blur depends on --scenes); --shard k/n makes only scenes with
+/// index % n == k, so n machines can share the work (same seed, same bytes).
 ///
 /// Examples:
 ///   drbokeh benchmark make --scenes 4 --size 128 --spp 64 -o bench
@@ -320,6 +321,8 @@ fn run_make(a: &MakeArgs) -> Result<()> {
         "entries": entries,
     });
     let manifest_path = a.out.join("manifest.json");
+    // A re-run resumes only the benchmark it would make: before anything is rewritten.
+    check_resume(&a.out, &manifest, &specs, dir_name)?;
     let text = serde_json::to_string_pretty(&manifest)? + "\n";
     drbokeh::io::write_atomic(&manifest_path, |w| {
         use std::io::Write;
@@ -358,6 +361,72 @@ fn run_make(a: &MakeArgs) -> Result<()> {
             start.elapsed().as_secs_f64(),
             manifest_path.display()
         );
+    }
+    Ok(())
+}
+
+/// The manifest fields that decide which scenes a benchmark holds.
+const MANIFEST_PARAMETERS: [(&str, &str); 6] = [
+    ("seed", "--seed"),
+    ("scenes", "--scenes"),
+    ("size", "--size"),
+    ("spp", "--spp"),
+    ("highlight_range", "--highlight-range"),
+    ("background_detail", "--background-detail"),
+];
+
+/// Refuses to resume into `out` when what is there was made with other parameters: each
+/// scene's blur target depends on `--scenes` and every scene on the others, so skipping a
+/// finished scene is right only when it is the scene this run would trace. Checks the
+/// existing `manifest.json` field by field, then every finished scene's `scene.json`
+/// against its spec.
+fn check_resume(
+    out: &Path,
+    manifest: &serde_json::Value,
+    specs: &[SceneSpec],
+    dir_name: impl Fn(usize) -> String,
+) -> Result<()> {
+    let refuse = |what: String| {
+        anyhow::anyhow!(
+            "{}: {what}; give another --output, or this benchmark's parameters to resume it",
+            out.display()
+        )
+    };
+    let manifest_path = out.join("manifest.json");
+    if manifest_path.is_file() {
+        let old: serde_json::Value = std::fs::read_to_string(&manifest_path)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok())
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: unreadable benchmark manifest; give another --output",
+                    manifest_path.display()
+                )
+            })?;
+        for (key, flag) in MANIFEST_PARAMETERS {
+            let (was, now) = (&old[key], &manifest[key]);
+            if was != now {
+                return Err(refuse(format!(
+                    "holds a benchmark made with {flag} {was} (this run: {now})"
+                )));
+            }
+        }
+    }
+    for (i, spec) in specs.iter().enumerate() {
+        let path = out.join(dir_name(i)).join("scene.json");
+        if !path.is_file() {
+            continue;
+        }
+        let mut existing = SceneSpec::read(&path)?;
+        existing.derived = None;
+        let mut expected = spec.clone();
+        trace::absolutize_paths(&mut expected, Path::new("."));
+        if existing != expected {
+            return Err(refuse(format!(
+                "{} holds a scene other than the one this run makes there",
+                dir_name(i)
+            )));
+        }
     }
     Ok(())
 }

@@ -246,3 +246,57 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
         stamp
     );
 }
+
+#[test]
+fn benchmark_refuses_to_resume_a_benchmark_made_with_other_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let make = |extra: &[&str]| {
+        let mut args = vec![
+            "benchmark",
+            "make",
+            "--output",
+            out.to_str().unwrap(),
+            "--size",
+            "24",
+            "--spp",
+            "16",
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        drbokeh(&args)
+    };
+    let o = make(&["--scenes", "3", "--seed", "7", "--shard", "0/2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = tree_bytes(&out);
+    // Another --scenes moves every scene's blur target: the finished scenes are not this
+    // run's, so it must refuse before rewriting the manifest or tracing anything.
+    for (extra, flag) in [
+        (["--scenes", "4", "--seed", "7"], "--scenes 3 (this run: 4)"),
+        (["--scenes", "3", "--seed", "8"], "--seed 7 (this run: 8)"),
+    ] {
+        let o = make(&extra);
+        assert!(!o.status.success());
+        let err = stderr(&o);
+        assert!(err.contains(flag), "{err}");
+        assert!(err.contains(out.to_str().unwrap()), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            tree_bytes(&out) == before,
+            "a refused run changed {}",
+            out.display()
+        );
+    }
+    // Without a manifest the scenes themselves are compared.
+    std::fs::remove_file(out.join("manifest.json")).unwrap();
+    let o = make(&["--scenes", "3", "--seed", "8"]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("scene_000 holds a scene other than"), "{err}");
+    assert!(!out.join("manifest.json").exists());
+    assert!(!out.join("scene_001").exists());
+    // The same parameters resume: the missing scene is made, the finished ones kept.
+    let o = make(&["--scenes", "3", "--seed", "7"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("scene_001/scene.json").is_file());
+}
