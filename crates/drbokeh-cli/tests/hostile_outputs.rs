@@ -335,9 +335,10 @@ fn case5_dfd_writes_all_its_outputs_or_none() {
 fn case7_sigint_removes_temporaries_and_stale_ones_are_swept() {
     let d = Dir::new();
     let bench = d.path("bench");
-    make_benchmark(&bench, 2, 128);
-    // Plant what killed runs leave: a scene directory of a dead process, and an old-style
+    make_benchmark(&bench, 3, 128);
+    // A scene still to make (as after an interrupted run), then what killed runs leave: a scene directory of a dead process, and an old-style
     // temporary from before the naming (aged past the hour).
+    std::fs::remove_dir_all(bench.join("scene_002")).unwrap();
     let dead_pid = u32::MAX - 11;
     let stale = bench.join(drbokeh::io::temps::name_for(dead_pid, 0, true));
     std::fs::create_dir_all(stale.join("inner")).unwrap();
@@ -350,6 +351,7 @@ fn case7_sigint_removes_temporaries_and_stale_ones_are_swept() {
         .unwrap();
     make_benchmark(&bench, 3, 128); // resumes: one new scene, and sweeps
     assert!(!stale.exists() && !legacy.exists(), "{:?}", names(&bench));
+    assert!(bench.join("scene_002/scene.json").is_file());
     assert!(
         names(&bench).iter().all(|n| !n.starts_with('.')),
         "{:?}",
