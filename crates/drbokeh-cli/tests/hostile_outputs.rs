@@ -336,8 +336,9 @@ fn case7_sigint_removes_temporaries_and_stale_ones_are_swept() {
     let d = Dir::new();
     let bench = d.path("bench");
     make_benchmark(&bench, 3, 128);
-    // A scene still to make (as after an interrupted run), then what killed runs leave: a scene directory of a dead process, and an old-style
-    // temporary from before the naming (aged past the hour).
+    // A scene still to make (as after an interrupted run), then what killed runs leave: a
+    // scene directory of a dead process, and an old-style temporary from before the naming
+    // (aged past the hour).
     std::fs::remove_dir_all(bench.join("scene_002")).unwrap();
     let dead_pid = u32::MAX - 11;
     let stale = bench.join(drbokeh::io::temps::name_for(dead_pid, 0, true));
