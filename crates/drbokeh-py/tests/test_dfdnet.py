@@ -290,6 +290,33 @@ def test_focus_prior_adds_its_weighted_term_to_the_image_loss():
     assert float(with_prior) == pytest.approx(float(base) + 1.5 * expected, rel=1e-5)
 
 
+def test_focus_prior_warmup_falls_linearly_to_the_prior_and_training_follows_it(tmp_path):
+    """``--focus-prior-warmup WEIGHT:STEPS``: the prior's weight starts at WEIGHT and falls
+    on a straight line to ``--focus-prior`` at step STEPS, then stays; training uses each
+    step's weight (its curve records it); malformed values are refused."""
+    from drbokeh.dfdnet.__main__ import _cfg, parse_args
+    from drbokeh.dfdnet.train import RunSpec, TrainConfig, train_run
+
+    cfg = _cfg(parse_args(["train", "--out", "o", "--focus-prior", "2", "--focus-prior-warmup", "6:300"]))
+    assert (cfg.w_focus, cfg.w_focus_start, cfg.focus_warmup_steps) == (2.0, 6.0, 300)
+    assert [cfg.focus_weight(s) for s in (0, 150, 225, 300, 1499)] == pytest.approx([6.0, 4.0, 3.0, 2.0, 2.0])
+    plain = _cfg(parse_args(["train", "--out", "o", "--focus-prior", "2"]))
+    assert plain.focus_weight(0) == plain.focus_weight(1000) == 2.0
+    for bad in ("6", "6:0", "-1:300", "x:300", "6:1.5", "nan:300", "6:300:1"):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", "--focus-prior-warmup", bad])
+    with pytest.raises(ValueError, match="warm-up"):
+        TrainConfig(w_focus_start=-1.0, focus_warmup_steps=10)
+
+    splits = {"train": _tiny_split(1), "val": _tiny_split(2, 2), "test": _tiny_split(3, 2)}
+    run_cfg = TrainConfig(steps=4, batch=2, crop=32, base=4, eval_every=4, w_focus=1.0, w_focus_start=5.0,
+                          focus_warmup_steps=2)
+    r = train_run(RunSpec("gausspsf", "l1g"), splits, run_cfg, tmp_path, log=lambda m: None)
+    assert [c["focus_weight"] for c in r["curve"]] == pytest.approx([5.0, 3.0, 1.0, 1.0])
+    for c in r["curve"]:  # the step's loss holds the prior at that step's weight
+        assert c["loss"] == pytest.approx(0.5 * c["l1"] + 0.5 * c["g"] + c["focus_weight"] * c["focus"], rel=1e-5)
+
+
 # ---- layers: NumPy transcriptions of crates/drbokeh/src/baselines ---------------------------
 
 
@@ -676,6 +703,20 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
     other_steps = _seed_dir(tmp_path, 4, steps=3)
     assert "steps (3 against 2)" in refused(d1, other_steps) and str(other_steps) in refused(d1, other_steps)
     assert "repeat a seed" in refused(d1, d1)
+    # a log written before a setting existed was trained with its default: accepted as such
+    import shutil
+
+    legacy, warm = tmp_path / "legacy", tmp_path / "warm"
+    for d, change in ((legacy, lambda c: [c.pop(k) for k in ("w_focus_start", "focus_warmup_steps")]),
+                      (warm, lambda c: c.update(w_focus_start=4.0, focus_warmup_steps=300))):
+        shutil.copytree(d2, d)
+        res = json.loads((d / "results.json").read_text())
+        for r in res["rows"]:
+            if "train_config" in r:
+                change(r["train_config"])
+        (d / "results.json").write_text(json.dumps(res))
+    assert main(["table", str(d1), str(legacy), "-o", str(tmp_path / "TL")]) == 0
+    assert "focus_warmup_steps (300 against 0)" in refused(d1, warm)
     assert "at least two" in refused(d1)
     assert "results.json: not found" in refused(d1, tmp_path / "nowhere")
     old = tmp_path / "old"

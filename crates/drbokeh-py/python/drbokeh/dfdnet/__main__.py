@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -63,6 +64,20 @@ def _min_blur_arg(text: str) -> float:
         return check_min_blur(v)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _warmup_arg(text: str) -> Tuple[float, int]:
+    """``--focus-prior-warmup WEIGHT:STEPS``: a weight >= 0 and a step count >= 1."""
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        weight, steps = float(parts[0]), int(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected WEIGHT:STEPS, e.g. 4:300") from None
+    if not math.isfinite(weight) or weight < 0.0 or steps < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a weight >= 0 and at least one step, e.g. 4:300")
+    return weight, steps
 
 
 def _seeds_arg(text: str) -> List[int]:
@@ -125,6 +140,9 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "image is only the loss's target) or 'aif+bokeh', the defocused image beside it (depth from the pair)")
     p.add_argument("--focus-prior", type=float, default=TrainConfig.w_focus, metavar="WEIGHT",
                    help="weight of a prior for the least defocus: WEIGHT x mean |disparity - focus| (default 0: off; docs/dfdnet.md)")
+    p.add_argument("--focus-prior-warmup", type=_warmup_arg, default=None, metavar="WEIGHT:STEPS",
+                   help="start the focus prior at WEIGHT and lower it linearly to --focus-prior over the first STEPS "
+                        "steps (default: no warm-up; e.g. 4:300; tried in session 23, not kept: docs/dfdnet.md)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
     p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised; layers: " + ", ".join(LAYERS)
                    + "; losses: " + ", ".join(LOSSES) + "); default: the table: " + ",".join(r.name for r in TABLE_RUNS))
@@ -140,7 +158,14 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
-                       highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs)
+                       highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs,
+                       **_warmup_fields(a.focus_prior_warmup))
+
+
+def _warmup_fields(warmup: Optional[Tuple[float, int]]) -> Dict[str, object]:
+    if warmup is None:
+        return {}
+    return {"w_focus_start": warmup[0], "focus_warmup_steps": warmup[1]}
 
 
 def _runs(a: argparse.Namespace) -> List[RunSpec]:
@@ -236,7 +261,8 @@ def _quick(a: argparse.Namespace) -> None:
              SplitSpec("test", 1713, 24, a.size, a.spp, a.focus, a.background_detail)]
     cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
-                      init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs)
+                      init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs,
+                      **_warmup_fields(a.focus_prior_warmup))
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")

@@ -12,10 +12,13 @@ the table would mix protocols, and it is refused with the first difference named
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
+
+from .train import TrainConfig
 
 # Rows of an eval table that are references, not trained through a layer.
 REFERENCE_LAYERS = ("supervised", "-")
@@ -46,10 +49,14 @@ def _read_json(path: Path, what: str) -> Dict[str, object]:
 
 
 def _differs(a: Dict[str, object], b: Dict[str, object]) -> Optional[str]:
-    """The first setting (outside :data:`FREE_SETTINGS`) whose value differs, with both values."""
+    """The first setting (outside :data:`FREE_SETTINGS`) whose value differs, with both
+    values. A setting that one log lacks (written before the setting existed) counts as
+    its default, which is what that run was trained with."""
+    defaults = asdict(TrainConfig())
     for key in sorted(set(a) | set(b)):
-        if key not in FREE_SETTINGS and a.get(key) != b.get(key):
-            return f"{key} ({b.get(key)!r} against {a.get(key)!r})"
+        va, vb = a.get(key, defaults.get(key)), b.get(key, defaults.get(key))
+        if key not in FREE_SETTINGS and va != vb:
+            return f"{key} ({vb!r} against {va!r})"
     return None
 
 

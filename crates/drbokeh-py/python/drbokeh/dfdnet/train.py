@@ -109,12 +109,33 @@ class TrainConfig:
     init_disparity: Optional[float] = 0.05
     # Weight of the focus prior: mean |disparity - focus| of the prediction (0: off).
     w_focus: float = 0.0
+    # The prior's warm-up: its weight falls linearly from ``w_focus_start`` at the first
+    # step to ``w_focus`` at step ``focus_warmup_steps`` (0: no warm-up). At a flat start
+    # the drbokeh layers' loss gives the background little push down or asks to raise
+    # it, where GaussPSF's lowers it; a stronger prior early holds the background down
+    # while the objects rise. Tried in session 23 and not kept: a weight that holds
+    # `physical5`'s background traps GaussPSF at the focus (docs/dfdnet.md).
+    w_focus_start: float = 0.0
+    focus_warmup_steps: int = 0
     # What the network sees (INPUTS).
     inputs: str = "aif"
 
     def __post_init__(self) -> None:
         if self.inputs not in INPUTS:
             raise ValueError(f"unknown network input {self.inputs!r} (available: {', '.join(INPUTS)})")
+        if self.focus_warmup_steps < 0 or not math.isfinite(self.w_focus_start) or self.w_focus_start < 0.0:
+            raise ValueError(
+                f"focus prior warm-up {self.w_focus_start}:{self.focus_warmup_steps}: "
+                "expected a weight >= 0 and a step count >= 0"
+            )
+
+    def focus_weight(self, step: int) -> float:
+        """The focus prior's weight at training step ``step`` (0-based): ``w_focus`` after
+        the warm-up, and during it the straight line from ``w_focus_start``."""
+        if step >= self.focus_warmup_steps:
+            return self.w_focus
+        t = step / self.focus_warmup_steps
+        return self.w_focus_start + (self.w_focus - self.w_focus_start) * t
 
     @property
     def in_channels(self) -> int:
@@ -165,12 +186,15 @@ def margin_px(blur: np.ndarray, crop: int) -> int:
 
 
 def image_loss(
-    layer: Callable[..., torch.Tensor], loss_name: str, cfg: TrainConfig, b: Dict[str, np.ndarray], pred: torch.Tensor
+    layer: Callable[..., torch.Tensor], loss_name: str, cfg: TrainConfig, b: Dict[str, np.ndarray], pred: torch.Tensor,
+    w_focus: Optional[float] = None,
 ) -> Tuple[torch.Tensor, Dict[str, float]]:
     """The self-supervised loss of one batch ``b`` (from :func:`random_crops`, with the
     highlight mode's arrays): render ``pred`` through ``layer``, compare with the traced
     image inside the crop's margin. Pixels clipped in the traced image are always left out
-    of L1 (as ``drbokeh dfd`` does); see ``TrainConfig.highlights`` for the rest."""
+    of L1 (as ``drbokeh dfd`` does); see ``TrainConfig.highlights`` for the rest.
+    ``w_focus``: the focus prior's weight (default ``cfg.w_focus``; training passes
+    ``cfg.focus_weight(step)``)."""
     aif = torch.from_numpy(b["aif"])
     source = torch.from_numpy(b["source"]) if "source" in b else aif
     target = torch.from_numpy(b["bokeh"])
@@ -191,11 +215,13 @@ def image_loss(
         w_structure=cfg.w_structure, edge_sensitivity=cfg.edge_sensitivity, mask=unclipped,
         structure_mask=structure_mask,
     )
-    if cfg.w_focus > 0.0:
+    w_focus = cfg.w_focus if w_focus is None else w_focus
+    if w_focus > 0.0:
         focus = torch.from_numpy(b["focus"]).to(pred.dtype).view(-1, 1, 1, 1)
         t_f = (pred - focus).abs().mean()
-        total = total + cfg.w_focus * t_f
+        total = total + w_focus * t_f
         terms["focus"] = float(t_f.detach())
+        terms["focus_weight"] = w_focus
     return total, terms
 
 
@@ -238,7 +264,7 @@ def train_run(
             loss = (pred - torch.from_numpy(b["disparity"])).abs().mean()
             terms = {"disparity_l1": float(loss.detach())}
         else:
-            loss, terms = image_loss(layer, spec.loss, cfg, b, pred)
+            loss, terms = image_loss(layer, spec.loss, cfg, b, pred, cfg.focus_weight(step))
         opt.zero_grad()
         loss.backward()
         opt.step()
