@@ -290,6 +290,44 @@ def test_focus_prior_adds_its_weighted_term_to_the_image_loss():
     assert float(with_prior) == pytest.approx(float(base) + 1.5 * expected, rel=1e-5)
 
 
+def test_focus_prior_radius_caps_each_pixel_term_at_the_blur_radius():
+    """``--focus-prior-radius PX``: a pixel's prior term is min(|d - f|, PX / K), so its
+    gradient vanishes once the blur radius K |d - f| reaches PX, and is the plain prior's
+    below; malformed values are refused."""
+    from drbokeh.dfdnet.__main__ import _cfg, parse_args
+    from drbokeh.dfdnet.train import TrainConfig, image_loss
+
+    b = {"aif": np.full((2, 3, 48, 48), 0.5, np.float32), "bokeh": np.full((2, 3, 48, 48), 0.5, np.float32),
+         "focus": np.array([0.0, 0.25], np.float32), "blur": np.array([2.0, 4.0], np.float32)}
+    # Item 0 (K 2, cap 0.5 for 1 px): |d - f| = 0.2 (below, kept) and 0.8 (capped at 0.5).
+    # Item 1 (K 4, cap 0.25): |d - f| = 0.1 (kept) and 0.45 (capped at 0.25).
+    pred = np.zeros((2, 1, 48, 48), np.float32)
+    pred[0, 0, :, :24], pred[0, 0, :, 24:] = 0.2, 0.8
+    pred[1, 0, :, :24], pred[1, 0, :, 24:] = 0.35, 0.7
+    p = torch.from_numpy(pred).requires_grad_(True)
+    layer = layers.make_layer("gausspsf")
+    cfg = _cfg(parse_args(["train", "--out", "o", "--focus-prior", "2", "--focus-prior-radius", "1"]))
+    assert (cfg.w_focus, cfg.focus_prior_radius_px) == (2.0, 1.0)
+    _, terms = image_loss(layer, "l1g", cfg, b, p)
+    assert terms["focus"] == pytest.approx((0.2 + 0.5 + 0.1 + 0.25) / 4, rel=1e-5)
+    _, plain = image_loss(layer, "l1g", TrainConfig(w_focus=2.0), b, p)
+    assert plain["focus"] == pytest.approx((0.2 + 0.8 + 0.1 + 0.45) / 4, rel=1e-5)
+    # The prior's gradient alone: the loss without the prior, subtracted.
+    with_prior, _ = image_loss(layer, "l1g", cfg, b, p)
+    (g_with,) = torch.autograd.grad(with_prior, p)
+    without, _ = image_loss(layer, "l1g", TrainConfig(), b, p)
+    (g_without,) = torch.autograd.grad(without, p)
+    g = (g_with - g_without).numpy() * pred.size / 2.0
+    assert g[0, 0, :, :24] == pytest.approx(np.ones((48, 24)), abs=1e-3)
+    assert g[1, 0, :, :24] == pytest.approx(np.ones((48, 24)), abs=1e-3)
+    assert np.abs(g[:, 0, :, 24:]).max() < 1e-3
+    for bad in ("0", "-1", "x", "nan", "inf"):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", "--focus-prior-radius", bad])
+    with pytest.raises(ValueError, match="radius"):
+        TrainConfig(focus_prior_radius_px=0.0)
+
+
 def test_focus_prior_warmup_falls_linearly_to_the_prior_and_training_follows_it(tmp_path):
     """``--focus-prior-warmup WEIGHT:STEPS``: the prior's weight starts at WEIGHT and falls
     on a straight line to ``--focus-prior`` at step STEPS, then stays; training uses each

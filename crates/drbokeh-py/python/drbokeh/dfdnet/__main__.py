@@ -66,6 +66,17 @@ def _min_blur_arg(text: str) -> float:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _radius_arg(text: str) -> float:
+    """``--focus-prior-radius PX``: a blur radius in pixels > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels > 0, e.g. 1") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels > 0, e.g. 1")
+    return v
+
+
 def _warmup_arg(text: str) -> Tuple[float, int]:
     """``--focus-prior-warmup WEIGHT:STEPS``: a weight >= 0 and a step count >= 1."""
     parts = text.split(":")
@@ -143,6 +154,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--focus-prior-warmup", type=_warmup_arg, default=None, metavar="WEIGHT:STEPS",
                    help="start the focus prior at WEIGHT and lower it linearly to --focus-prior over the first STEPS "
                         "steps (default: no warm-up; e.g. 4:300; tried in session 23, not kept: docs/dfdnet.md)")
+    p.add_argument("--focus-prior-radius", type=_radius_arg, default=None, metavar="PX",
+                   help="apply the focus prior only inside the depth of field: each pixel's term is capped at PX / K, so "
+                        "it stops pulling once the predicted blur radius K |disparity - focus| reaches PX pixels "
+                        "(default: everywhere; e.g. 1; session 24: docs/dfdnet.md)")
     p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
     p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised; layers: " + ", ".join(LAYERS)
                    + "; losses: " + ", ".join(LOSSES) + "); default: the table: " + ",".join(r.name for r in TABLE_RUNS))
@@ -159,7 +174,7 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
                        highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs,
-                       **_warmup_fields(a.focus_prior_warmup))
+                       focus_prior_radius_px=a.focus_prior_radius, **_warmup_fields(a.focus_prior_warmup))
 
 
 def _warmup_fields(warmup: Optional[Tuple[float, int]]) -> Dict[str, object]:
@@ -262,7 +277,7 @@ def _quick(a: argparse.Namespace) -> None:
     cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
                       init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs,
-                      **_warmup_fields(a.focus_prior_warmup))
+                      focus_prior_radius_px=a.focus_prior_radius, **_warmup_fields(a.focus_prior_warmup))
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")

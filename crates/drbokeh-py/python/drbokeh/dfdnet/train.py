@@ -117,6 +117,12 @@ class TrainConfig:
     # `physical5`'s background traps GaussPSF at the focus (docs/dfdnet.md).
     w_focus_start: float = 0.0
     focus_warmup_steps: int = 0
+    # The prior only inside the depth of field (None: everywhere): a pixel's term is
+    # min(|disparity - focus|, R / K), so it pulls a pixel towards the focus only while the
+    # predicted blur radius K |disparity - focus| is below R px, where a lens shows (almost)
+    # no blur and the rendering gives no gradient, and leaves blurred objects alone
+    # (session 24, docs/dfdnet.md).
+    focus_prior_radius_px: Optional[float] = None
     # What the network sees (INPUTS).
     inputs: str = "aif"
 
@@ -128,6 +134,9 @@ class TrainConfig:
                 f"focus prior warm-up {self.w_focus_start}:{self.focus_warmup_steps}: "
                 "expected a weight >= 0 and a step count >= 0"
             )
+        r = self.focus_prior_radius_px
+        if r is not None and (not math.isfinite(r) or r <= 0.0):
+            raise ValueError(f"focus prior radius {r}: expected a blur radius in pixels > 0")
 
     def focus_weight(self, step: int) -> float:
         """The focus prior's weight at training step ``step`` (0-based): ``w_focus`` after
@@ -218,7 +227,12 @@ def image_loss(
     w_focus = cfg.w_focus if w_focus is None else w_focus
     if w_focus > 0.0:
         focus = torch.from_numpy(b["focus"]).to(pred.dtype).view(-1, 1, 1, 1)
-        t_f = (pred - focus).abs().mean()
+        off_focus = (pred - focus).abs()
+        if cfg.focus_prior_radius_px is not None:
+            # |d - f| capped at R / K: no pull once the blur radius K |d - f| reaches R px.
+            k = torch.from_numpy(b["blur"]).to(pred.dtype).view(-1, 1, 1, 1)
+            off_focus = torch.minimum(off_focus, cfg.focus_prior_radius_px / k)
+        t_f = off_focus.mean()
         total = total + w_focus * t_f
         terms["focus"] = float(t_f.detach())
         terms["focus_weight"] = w_focus
