@@ -173,14 +173,15 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
-                       highlights=a.highlights, init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs,
-                       focus_prior_radius_px=a.focus_prior_radius, **_warmup_fields(a.focus_prior_warmup))
+                       highlights=a.highlights, init_disparity=a.init_disparity, inputs=a.inputs, **_prior_fields(a))
 
 
-def _warmup_fields(warmup: Optional[Tuple[float, int]]) -> Dict[str, object]:
-    if warmup is None:
-        return {}
-    return {"w_focus_start": warmup[0], "focus_warmup_steps": warmup[1]}
+def _prior_fields(a: argparse.Namespace) -> Dict[str, object]:
+    """The focus prior's ``TrainConfig`` fields from the command line (weight, radius, warm-up)."""
+    fields: Dict[str, object] = {"w_focus": a.focus_prior, "focus_prior_radius_px": a.focus_prior_radius}
+    if a.focus_prior_warmup is not None:
+        fields["w_focus_start"], fields["focus_warmup_steps"] = a.focus_prior_warmup
+    return fields
 
 
 def _runs(a: argparse.Namespace) -> List[RunSpec]:
@@ -276,8 +277,7 @@ def _quick(a: argparse.Namespace) -> None:
              SplitSpec("test", 1713, 24, a.size, a.spp, a.focus, a.background_detail)]
     cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
-                      init_disparity=a.init_disparity, w_focus=a.focus_prior, inputs=a.inputs,
-                      focus_prior_radius_px=a.focus_prior_radius, **_warmup_fields(a.focus_prior_warmup))
+                      init_disparity=a.init_disparity, inputs=a.inputs, **_prior_fields(a))
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")
