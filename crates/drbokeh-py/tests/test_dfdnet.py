@@ -723,6 +723,21 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
     md = (tmp_path / "T" / "results.md").read_text()
     best = min(layer_runs, key=lambda n: rows[n]["mae_mean"])
     assert f"**{rows[best]['mae_mean']:.4f}**" in md and "MAE seed 1" in md and "MAE seed 2" in md
+    # scene by scene: each scene's MAE (they average to the MAE: every scene has as many
+    # pixels), and the other layer run against the best, paired over the shared test scenes
+    for e in evals:
+        for row in e.values():
+            assert len(row["mae_per_scene"]) == 2 and np.mean(row["mae_per_scene"]) == pytest.approx(row["mae"])
+    assert table["best"] == best
+    other = next(n for n in layer_runs if n != best)
+    diff = np.mean([np.subtract(e[other]["mae_per_scene"], e[best]["mae_per_scene"]) for e in evals], axis=0)
+    (pair,) = table["paired"]
+    half = 1.96 * diff.std(ddof=1) / np.sqrt(len(diff))
+    assert pair["run"] == other and pair["against"] == best and pair["scenes"] == 2
+    assert pair["mean"] == pytest.approx(diff.mean()) and pair["mean"] >= 0
+    assert (pair["low"], pair["high"]) == pytest.approx((diff.mean() - half, diff.mean() + half))
+    assert pair["scenes_lower"] == int((diff < 0).sum())
+    assert f"| {other} | {best} | {pair['mean']:+.4f} |" in md and "Scene by scene against the lowest mean" in md
 
     d3 = _seed_dir(tmp_path, 3, runs=("gausspsf-l1g", "supervised"))
     assert main(["table", str(d1), str(d3), "-o", str(tmp_path / "T3")]) == 0
@@ -754,6 +769,16 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
                 change(r["train_config"])
         (d / "results.json").write_text(json.dumps(res))
     assert main(["table", str(d1), str(legacy), "-o", str(tmp_path / "TL")]) == 0
+    # an eval from before per-scene MAEs were recorded: the table, without the pairing
+    before = tmp_path / "before"
+    shutil.copytree(d2, before)
+    res = json.loads((before / "results.json").read_text())
+    for r in res["rows"]:
+        r.pop("mae_per_scene")
+    (before / "results.json").write_text(json.dumps(res))
+    assert main(["table", str(d1), str(before), "-o", str(tmp_path / "TB")]) == 0
+    assert json.loads((tmp_path / "TB" / "results.json").read_text())["paired"] == []
+    assert "Scene by scene" not in (tmp_path / "TB" / "results.md").read_text()
     assert "focus_warmup_steps (300 against 0)" in refused(d1, warm)
     assert "at least two" in refused(d1)
     assert "results.json: not found" in refused(d1, tmp_path / "nowhere")
@@ -768,7 +793,8 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
     assert "not readable as JSON" in refused(d1, old)
     (old / "results.json").write_text("[]")
     assert "results.json: expected a JSON object, found a list" in refused(d1, old)
-    for key, bad in (("mae", "0.1"), ("layer", None), ("train_config", [])):
+    for key, bad in (("mae", "0.1"), ("layer", None), ("train_config", []), ("mae_per_scene", [0.1]),
+                     ("mae_per_scene", ["a"] * 4)):
         broken = json.loads(json.dumps(res))
         broken["rows"][0][key] = bad
         (old / "results.json").write_text(json.dumps(broken))

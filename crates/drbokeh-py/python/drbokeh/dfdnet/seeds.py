@@ -4,7 +4,10 @@ Each ``DIR`` is an ``eval`` output (its ``results.json``) of the same protocol w
 ``--seed``. A single seed cannot rank layers whose differences are as small as one layer's
 spread over seeds (docs/dfdnet.md, sessions 12-17), so the table shows, per run, the MAE of
 every seed, their mean and spread, how often the run had the lowest MAE among the runs
-trained through a rendering layer, and the means of the other metrics. The directories
+trained through a rendering layer, and the means of the other metrics. Below it, each
+layer run is set against the one with the lowest mean scene by scene (:func:`paired`): the
+seeds share their test scenes, and a scene's difficulty moves every run's MAE together, so
+the per-scene difference resolves gaps smaller than the spread over seeds. The directories
 must agree on everything but the seed (test scenes, data, training settings); otherwise
 the table would mix protocols, and it is refused with the first difference named.
 """
@@ -60,11 +63,15 @@ def _differs(a: Dict[str, object], b: Dict[str, object]) -> Optional[str]:
     return None
 
 
-def _row_ok(row: object) -> bool:
-    """Whether a results.json row has what the table reads, with the types ``eval`` writes."""
+def _row_ok(row: object, scenes: int) -> bool:
+    """Whether a results.json row has what the table reads, with the types ``eval`` writes
+    (each scene's MAE, one per test scene, is optional: older evals lack it)."""
+    per_scene = row.get("mae_per_scene", []) if isinstance(row, dict) else None
     return (isinstance(row, dict) and all(isinstance(row.get(k), str) for k in ("run", "layer", "loss"))
             and isinstance(row.get("mae"), (int, float)) and isinstance(row.get("seed", 0), int)
-            and isinstance(row.get("train_config", {}), dict))
+            and isinstance(row.get("train_config", {}), dict)
+            and isinstance(per_scene, list) and all(isinstance(v, (int, float)) for v in per_scene)
+            and len(per_scene) in (0, scenes))
 
 
 def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
@@ -79,9 +86,11 @@ def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
     for d in dirs:
         p = Path(d) / "results.json"
         r = _read_json(p, "eval results: run `python -m drbokeh.dfdnet eval` there first")
-        rows = r.get("rows")
-        if not isinstance(rows, list) or not all(_row_ok(x) for x in rows):
-            raise SeedTableError(f"{p}: not an eval results file (rows need a run, layer, loss and MAE)")
+        rows, names = r.get("rows"), r.get("test_scenes", [])
+        scenes = len(names) if isinstance(names, list) else -1
+        if not isinstance(rows, list) or not all(_row_ok(x, scenes) for x in rows):
+            raise SeedTableError(f"{p}: not an eval results file (rows need a run, layer, loss and MAE, "
+                                 "and a per-scene MAE, where given, for each test scene)")
         found = {row["seed"] for row in rows if "seed" in row}
         if len(found) != 1:
             raise SeedTableError(f"{p}: " + (
@@ -133,8 +142,34 @@ def combine(results: Sequence[Dict[str, object]]) -> Dict[str, object]:
             row[key] = float(np.mean(vals)) if all(isinstance(v, (int, float)) for v in vals) else None
         rows.append(row)
     partial = sorted({row["run"] for r in results for row in r["rows"]} - set(names))  # type: ignore[union-attr]
+    layered = [r for r in rows if r["wins"] is not None]
+    best = min(layered, key=lambda r: r["mae_mean"])["run"] if layered else None
     return {"seeds": seeds, "dirs": [r["dir"] for r in results], "rows": rows, "left_out": partial,
-            "test_scenes": len(results[0].get("test_scenes", []))}  # type: ignore[arg-type]
+            "test_scenes": len(results[0].get("test_scenes", [])),  # type: ignore[arg-type]
+            "best": best, "paired": paired(by_seed, layer_runs, best)}
+
+
+def paired(by_seed: Sequence[Dict[str, Dict[str, object]]], layer_runs: Sequence[str],
+           best: Optional[str]) -> List[Dict[str, object]]:
+    """Each layer run against ``best`` (the lowest mean MAE), scene by scene: per test scene
+    the run's MAE minus ``best``'s, averaged over the seeds; the mean over the scenes with a
+    95 % interval (mean +- 1.96 standard errors, the scenes taken as independent) and the
+    number of scenes where the run is lower. The seeds share their test scenes, so this
+    removes the scenes' own difficulty, which dominates a seed's MAE. Runs whose evals lack
+    per-scene MAEs (written before eval recorded them) are left out."""
+    if best is None or not all(s[best].get("mae_per_scene") for s in by_seed):
+        return []
+    base = np.array([s[best]["mae_per_scene"] for s in by_seed], np.float64)
+    out = []
+    for n in layer_runs:
+        if n == best or not all(s[n].get("mae_per_scene") for s in by_seed):
+            continue
+        diff = (np.array([s[n]["mae_per_scene"] for s in by_seed], np.float64) - base).mean(axis=0)
+        half = 1.96 * float(diff.std(ddof=1)) / np.sqrt(len(diff)) if len(diff) > 1 else float("nan")
+        mean = float(diff.mean())
+        out.append({"run": n, "against": best, "mean": mean, "low": mean - half, "high": mean + half,
+                    "scenes": int(len(diff)), "scenes_lower": int((diff < 0).sum())})
+    return out
 
 
 def _f(v: object, digits: int = 4) -> str:
@@ -144,8 +179,7 @@ def _f(v: object, digits: int = 4) -> str:
 def markdown(table: Dict[str, object]) -> str:
     seeds: List[int] = table["seeds"]  # type: ignore[assignment]
     rows: List[Dict[str, object]] = table["rows"]  # type: ignore[assignment]
-    layered = [r for r in rows if r["wins"] is not None]
-    best = min(layered, key=lambda r: r["mae_mean"])["run"] if layered else None
+    best = table["best"]
     head = ["run", "layer", "loss"] + [f"MAE seed {s}" for s in seeds] + ["MAE mean", "min-max", "lowest (of layers)"]
     head += [name + " (mean)" for _, name in MEAN_COLUMNS]
     lines = ["# drbokeh.dfdnet: test table over seeds", "",
@@ -165,6 +199,17 @@ def markdown(table: Dict[str, object]) -> str:
                   "-" if r["wins"] is None else f"{r['wins']} of {len(seeds)}"]
         cells += [_f(r[key], 3 if key == "delta125" else (1 if key == "seconds_per_epoch" else 4)) for key, _ in MEAN_COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
+    pairs: List[Dict[str, object]] = table.get("paired", [])  # type: ignore[assignment]
+    if pairs:
+        lines += ["", f"Scene by scene against the lowest mean ({best}): each scene's MAE minus {best}'s, averaged "
+                  f"over the seeds, then the mean over the {pairs[0]['scenes']} test scenes with a 95 % interval "
+                  "(mean +- 1.96 standard errors); a negative difference is a lower error than "
+                  f"{best}'s. An interval that holds 0 does not separate the two.", "",
+                  "| run | minus | mean difference | 95 % interval | scenes where lower |",
+                  "| --- | --- | ---: | --- | ---: |"]
+        for p in pairs:
+            lines.append(f"| {p['run']} | {p['against']} | {p['mean']:+.4f} | [{p['low']:+.4f}, {p['high']:+.4f}] | "
+                         f"{p['scenes_lower']} of {p['scenes']} |")
     return "\n".join(lines) + "\n"
 
 
