@@ -94,6 +94,7 @@ pub enum BenchmarkCommand {
 ///       --shard 0/10
 ///   drbokeh benchmark make --scenes 24 --seed 202 --size 256 \
 ///       --highlight-range 5:50 -o bench-bright
+///   drbokeh benchmark make --scenes 480 --size 128 --perspective -o bench-cue
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct MakeArgs {
@@ -127,6 +128,14 @@ pub struct MakeArgs {
     /// the background shows its blur (used for depth-from-defocus training data).
     #[arg(long, default_value_t = 0.0, value_name = "STRENGTH")]
     pub background_detail: f64,
+
+    /// Lay the foregrounds out as a camera sees objects of about one size standing on a
+    /// ground: the nearer, the larger and the lower in the frame (the same depths, focus
+    /// and blur). Without it a billboard's size and place say nothing about its depth;
+    /// with it the all-in-focus image carries a depth cue, as photos do (used for depth
+    /// networks that see the all-in-focus image alone; docs/dfdnet.md).
+    #[arg(long)]
+    pub perspective: bool,
 
     /// Make only the scenes with index % n == k.
     #[arg(long, value_name = "k/n")]
@@ -280,6 +289,7 @@ fn run_make(a: &MakeArgs) -> Result<()> {
             let content = benchmark::Content {
                 highlights,
                 background_detail: a.background_detail,
+                perspective: a.perspective,
             };
             benchmark::scene_spec_with_content(a.seed, i, a.scenes, a.size, a.spp, content)
         })
@@ -319,6 +329,7 @@ fn run_make(a: &MakeArgs) -> Result<()> {
         "fov_deg": benchmark::FOV_DEG,
         "display_encoding": drbokeh::trace::texture::DISPLAY_ENCODING,
         "entries": entries,
+        "perspective": a.perspective,
     });
     let manifest_path = a.out.join("manifest.json");
     // A re-run resumes only the benchmark it would make: before anything is rewritten.
@@ -366,13 +377,14 @@ fn run_make(a: &MakeArgs) -> Result<()> {
 }
 
 /// The manifest fields that decide which scenes a benchmark holds.
-const MANIFEST_PARAMETERS: [(&str, &str); 6] = [
+const MANIFEST_PARAMETERS: [(&str, &str); 7] = [
     ("seed", "--seed"),
     ("scenes", "--scenes"),
     ("size", "--size"),
     ("spp", "--spp"),
     ("highlight_range", "--highlight-range"),
     ("background_detail", "--background-detail"),
+    ("perspective", "--perspective"),
 ];
 
 /// Refuses to resume into `out` when what is there was made with other parameters: each
@@ -404,7 +416,13 @@ fn check_resume(
                 )
             })?;
         for (key, flag) in MANIFEST_PARAMETERS {
-            let (was, now) = (&old[key], &manifest[key]);
+            // Benchmarks made before --perspective existed have no such field: off.
+            let absent = match key {
+                "perspective" => serde_json::Value::Bool(false),
+                _ => serde_json::Value::Null,
+            };
+            let was = old.get(key).unwrap_or(&absent);
+            let now = &manifest[key];
             if was != now {
                 return Err(refuse(format!(
                     "holds a benchmark made with {flag} {was} (this run: {now})"

@@ -272,10 +272,17 @@ fn benchmark_refuses_to_resume_a_benchmark_made_with_other_parameters() {
     // Another --scenes moves every scene's blur target: the finished scenes are not this
     // run's, so it must refuse before rewriting the manifest or tracing anything.
     for (extra, flag) in [
-        (["--scenes", "4", "--seed", "7"], "--scenes 3 (this run: 4)"),
-        (["--scenes", "3", "--seed", "8"], "--seed 7 (this run: 8)"),
+        (
+            &["--scenes", "4", "--seed", "7"][..],
+            "--scenes 3 (this run: 4)",
+        ),
+        (&["--scenes", "3", "--seed", "8"], "--seed 7 (this run: 8)"),
+        (
+            &["--scenes", "3", "--seed", "7", "--perspective"],
+            "--perspective false (this run: true)",
+        ),
     ] {
-        let o = make(&extra);
+        let o = make(extra);
         assert!(!o.status.success());
         let err = stderr(&o);
         assert!(err.contains(flag), "{err}");
@@ -299,4 +306,13 @@ fn benchmark_refuses_to_resume_a_benchmark_made_with_other_parameters() {
     let o = make(&["--scenes", "3", "--seed", "7"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(out.join("scene_001/scene.json").is_file());
+    // A manifest from before --perspective (no such field) resumes as made without it.
+    let path = out.join("manifest.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert_eq!(manifest["perspective"], serde_json::Value::Bool(false));
+    manifest.as_object_mut().unwrap().remove("perspective");
+    std::fs::write(&path, manifest.to_string()).unwrap();
+    let o = make(&["--scenes", "3", "--seed", "7"]);
+    assert!(o.status.success(), "{}", stderr(&o));
 }

@@ -865,6 +865,64 @@ def test_background_detail_reaches_the_traced_scenes_and_the_cache_record(tmp_pa
         prepare(tmp_path / "cache", [spec], cli=str(_find_cli()))
 
 
+def test_perspective_reaches_the_traced_scenes_and_the_cache_record(tmp_path):
+    """``perspective`` is passed to ``drbokeh benchmark make --perspective`` (recorded in the
+    manifest; the foregrounds are squares, larger the nearer), a data cache recorded before
+    the option existed still serves specs without it, and one made without it is refused
+    for specs with it."""
+    from drbokeh.dfdnet.data import SplitSpec, make_benchmark, prepare
+
+    spec = SplitSpec("train", 1711, 2, 32, 4, "far", 0.0, True)
+    make_benchmark(spec, tmp_path / "b", str(_find_cli()))
+    manifest = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert manifest["perspective"] is True
+    scenes = sorted(p for p in (tmp_path / "b").iterdir() if p.is_dir())
+    assert scenes, "no scene made"
+    for scene in scenes:
+        fgs = [b for b in json.loads((scene / "scene.json").read_text())["billboards"] if b["name"] != "background"]
+        assert all(b["size"][0] == b["size"][1] for b in fgs), fgs
+        nearest, farthest = min(fgs, key=lambda b: b["depth_mm"]), max(fgs, key=lambda b: b["depth_mm"])
+        # The nearest is at least 0.85 * 0.86 of the frame wide and lower in the frame.
+        assert nearest["size"][0] > 0.7 and nearest["size"][0] > farthest["size"][0], fgs
+        assert nearest["center"][1] > farthest["center"][1], fgs
+    old = dict(SplitSpec("train", 1711, 1, 32, 4, "far").__dict__)
+    del old["perspective"]
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / "splits.json").write_text(json.dumps([old]))
+    with pytest.raises(ValueError, match="other splits"):
+        prepare(tmp_path / "cache", [SplitSpec("train", 1711, 1, 32, 4, "far", 0.0, True)], cli=str(_find_cli()))
+    prepare(tmp_path / "cache", [SplitSpec("train", 1711, 1, 32, 4, "far")], cli=str(_find_cli()))
+    assert "perspective" in json.loads((tmp_path / "cache" / "splits.json").read_text())[0]
+
+
+def test_random_crops_keep_images_upright_without_vertical_flips():
+    """``vertical_flips=False`` (``--perspective``) never turns a crop upside down and
+    leaves the random draws as they are: each crop is the flipped one's vertical mirror or
+    the same, and some crops of the default are upside down."""
+    from drbokeh.dfdnet.data import Split, random_crops
+
+    n, size, crop = 6, 12, 8
+    rng0 = np.random.default_rng(0)
+    split = Split(rng0.random((n, 3, size, size), np.float32), rng0.random((n, 3, size, size), np.float32),
+                  rng0.random((n, 1, size, size), np.float32), np.zeros(n, np.float32), np.full(n, 3.0, np.float32),
+                  np.ones(n), np.ones(n), [str(i) for i in range(n)])
+    idx = np.array([0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5])
+    up = random_crops(split, idx, crop, np.random.default_rng(5), vertical_flips=False)
+    any_ = random_crops(split, idx, crop, np.random.default_rng(5))
+    flipped = 0
+    for j, i in enumerate(idx):
+        img = split.aif[i]
+        windows = [img[:, y : y + crop, x : x + crop] for y in range(size - crop + 1) for x in range(size - crop + 1)]
+        upright = [w for w in windows] + [w[:, :, ::-1] for w in windows]
+        assert any(np.array_equal(up["aif"][j], w) for w in upright), j
+        same = np.array_equal(up["aif"][j], any_["aif"][j])
+        mirrored = np.array_equal(up["aif"][j][:, ::-1], any_["aif"][j])
+        assert same or mirrored, j
+        flipped += not same
+        assert np.array_equal(up["disparity"][j][:, ::-1] if not same else up["disparity"][j], any_["disparity"][j])
+    assert flipped > 0
+
+
 def test_textured_mask_is_the_local_luminance_std():
     from drbokeh.dfdnet.evaluate import textured_mask
 

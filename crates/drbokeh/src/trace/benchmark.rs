@@ -54,8 +54,9 @@ pub fn scene_spec(
     scene_spec_with_content(seed, index, count, size, spp, Content::default())
 }
 
-/// What a benchmark's scenes show beyond their layout: the highlights' range and the
-/// background's fine detail. Neither changes the geometry, focus, blur or random draws.
+/// What a benchmark's scenes show beyond their depths: the highlights' range, the
+/// background's fine detail, and whether the foregrounds' layout in the frame follows their
+/// depth. None of them changes the depths, focus, blur or random draws.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Content {
     /// Range of the highlights' linear gains.
@@ -63,6 +64,11 @@ pub struct Content {
     /// Strength in [0, 1] of the fine detail on the background
     /// ([`super::procedural::generate_with`]); 0, the default, for none.
     pub background_detail: f64,
+    /// Foregrounds laid out as a camera sees objects of about one size standing on a
+    /// ground ([`perspective_layout`]): the nearer, the larger and the lower in the frame.
+    /// Off (the default), each foreground's size and place are drawn independently of its
+    /// depth, so that the all-in-focus image says nothing about how far a billboard is.
+    pub perspective: bool,
 }
 
 impl Default for Content {
@@ -70,8 +76,29 @@ impl Default for Content {
         Content {
             highlights: HighlightRange::default(),
             background_detail: 0.0,
+            perspective: false,
         }
     }
+}
+
+/// Side of a foreground billboard (fraction of the frame width) at normalised disparity 0
+/// and 1 under [`Content::perspective`].
+pub const PERSPECTIVE_SIDE: (f64, f64) = (0.25, 0.85);
+/// Vertical centre (fraction of the frame height, 0 at the top) of a foreground billboard
+/// at normalised disparity 0 and 1 under [`Content::perspective`].
+pub const PERSPECTIVE_HEIGHT: (f64, f64) = (0.35, 0.75);
+
+/// The layout cue of [`Content::perspective`]: a foreground's square side and vertical
+/// centre from its normalised disparity `t` in [0, 1] (1 the nearest billboard, 0 the
+/// background), interpolated linearly between [`PERSPECTIVE_SIDE`] and
+/// [`PERSPECTIVE_HEIGHT`]'s ends. The independent draws (`side_draw` in [0.35, 0.8],
+/// `height_draw` in [0.2, 0.8]) only jitter the result (side by -14 % to +11 %, height by
+/// +-0.03), so that depth stays readable from size and height.
+pub fn perspective_layout(t: f64, side_draw: f64, height_draw: f64) -> (f64, f64) {
+    let lerp = |(a, b): (f64, f64)| a + (b - a) * t.clamp(0.0, 1.0);
+    let side = lerp(PERSPECTIVE_SIDE) * (side_draw / 0.575).powf(0.3);
+    let height = lerp(PERSPECTIVE_HEIGHT) + 0.1 * (height_draw - 0.5);
+    (side, height)
 }
 
 /// [`scene_spec`] with `content`'s highlights and background detail: the same geometry,
@@ -89,6 +116,7 @@ pub fn scene_spec_with_content(
     let Content {
         highlights,
         background_detail,
+        perspective,
     } = content;
     highlights.validate()?;
     super::procedural::validate_background_detail(background_detail)?;
@@ -148,6 +176,9 @@ pub fn scene_spec_with_content(
             break (all, focus_depth, aperture);
         }
     };
+    // Normalised disparity of a depth: 1 at the nearest billboard, 0 at the farthest.
+    let (near, far) = (depths[0], depths[4]);
+    let disparity = |z: f64| (1.0 / z - 1.0 / far) / (1.0 / near - 1.0 / far);
     let mut billboards = Vec::new();
     for (k, &depth) in depths.iter().enumerate() {
         let (name, center, size, kind) = if k == 4 {
@@ -160,10 +191,17 @@ pub fn scene_spec_with_content(
         } else {
             let s = rng.range(0.35, 0.8);
             let aspect = rng.range(0.75, 1.33);
+            let center = [rng.range(0.2, 0.8), rng.range(0.2, 0.8)];
+            let (center, size) = if perspective {
+                let (side, height) = perspective_layout(disparity(depth), s, center[1]);
+                ([center[0], height], [side, side])
+            } else {
+                (center, [s * aspect.sqrt(), s / aspect.sqrt()])
+            };
             (
                 format!("{:?}", kinds[k]).to_lowercase(),
-                [rng.range(0.2, 0.8), rng.range(0.2, 0.8)],
-                [s * aspect.sqrt(), s / aspect.sqrt()],
+                center,
+                size,
                 kinds[k],
             )
         };
@@ -298,6 +336,56 @@ mod tests {
         assert!(HighlightRange::parse("50:5").is_err());
         assert!(HighlightRange::parse("0:5").is_err());
         assert!(HighlightRange::parse("x").is_err());
+    }
+
+    #[test]
+    fn perspective_lays_foregrounds_out_by_depth_and_changes_nothing_else() {
+        let mut sides = Vec::new();
+        for index in 0..12 {
+            let std = scene_spec(9, index, 12, 64, 16).unwrap();
+            let content = Content {
+                perspective: true,
+                ..Content::default()
+            };
+            let p = scene_spec_with_content(9, index, 12, 64, 16, content).unwrap();
+            p.validate().unwrap();
+            assert_eq!(std.camera, p.camera);
+            let (near, far) = (p.billboards[0].depth_mm, p.billboards[4].depth_mm);
+            for (x, y) in std.billboards.iter().zip(&p.billboards) {
+                assert_eq!(
+                    (&x.name, x.depth_mm, &x.texture),
+                    (&y.name, y.depth_mm, &y.texture)
+                );
+                if y.name == "background" {
+                    assert_eq!((x.center, x.size), (y.center, y.size));
+                    continue;
+                }
+                // Same horizontal place; side and height from the normalised disparity.
+                assert_eq!(x.center[0], y.center[0]);
+                let t = (1.0 / y.depth_mm - 1.0 / far) / (1.0 / near - 1.0 / far);
+                let side = PERSPECTIVE_SIDE.0 + (PERSPECTIVE_SIDE.1 - PERSPECTIVE_SIDE.0) * t;
+                let height =
+                    PERSPECTIVE_HEIGHT.0 + (PERSPECTIVE_HEIGHT.1 - PERSPECTIVE_HEIGHT.0) * t;
+                assert_eq!(y.size[0], y.size[1]);
+                assert!(
+                    y.size[0] > side * 0.85 && y.size[0] < side * 1.12,
+                    "{index} {}",
+                    y.name
+                );
+                assert!((y.center[1] - height).abs() <= 0.03 + 1e-12);
+                sides.push((t, y.size[0]));
+            }
+        }
+        // Nearer foregrounds are larger: every pair more than 0.5 apart in disparity is
+        // ordered by size (the jitter cannot undo that much).
+        for &(ta, sa) in &sides {
+            for &(tb, sb) in &sides {
+                if ta > tb + 0.5 {
+                    assert!(sa > sb, "t {ta} side {sa} against t {tb} side {sb}");
+                }
+            }
+        }
+        assert!(sides.iter().any(|s| s.0 > 0.99) && sides.iter().any(|s| s.0 < 0.3));
     }
 
     #[test]

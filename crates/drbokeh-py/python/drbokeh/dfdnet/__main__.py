@@ -124,6 +124,11 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--background-detail", type=float, default=None, metavar="STRENGTH",
                    help=f"fine detail on the scenes' backgrounds, in [0, 1] (default {BACKGROUND_DETAIL}; 0 with --quick; "
                         "drbokeh benchmark make --background-detail; docs/dfdnet.md)")
+    p.add_argument("--perspective", action="store_true",
+                   help="scenes whose foregrounds' size and height in the frame follow their depth (nearer: larger, "
+                        "lower), so the all-in-focus image carries a depth cue as photos do; without it the image says "
+                        "nothing about how far a billboard is; training crops are then not flipped upside down "
+                        "(drbokeh benchmark make --perspective; docs/dfdnet.md)")
     p.add_argument("--min-blur", type=_min_blur_arg, default=0.0, metavar="K_PX",
                    help="keep only scenes whose largest blur K is at least K_PX pixels, in every split "
                         "(default 0: all; the scenes are traced and cached as without it)")
@@ -166,14 +171,16 @@ def _common(p: argparse.ArgumentParser) -> None:
 def _specs(a: argparse.Namespace) -> List[SplitSpec]:
     if not 0.0 <= a.background_detail <= 1.0:
         raise SystemExit(f"--background-detail {a.background_detail}: must be in [0, 1]")
-    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes, a.focus, a.background_detail)
+    return default_splits(a.size, a.spp, a.train_scenes, a.val_scenes, a.test_scenes, a.focus, a.background_detail,
+                          a.perspective)
 
 
 def _cfg(a: argparse.Namespace) -> TrainConfig:
     if a.crop % 16 or a.crop > a.size:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
-                       highlights=a.highlights, init_disparity=a.init_disparity, inputs=a.inputs, **_prior_fields(a))
+                       highlights=a.highlights, init_disparity=a.init_disparity, inputs=a.inputs,
+                       vertical_flips=not a.perspective, **_prior_fields(a))
 
 
 def _prior_fields(a: argparse.Namespace) -> Dict[str, object]:
@@ -272,12 +279,13 @@ def _namespace_with(a: argparse.Namespace, **changes: object) -> argparse.Namesp
 
 def _quick(a: argparse.Namespace) -> None:
     """Tiny data (64 px, far focus as the table), a few steps of drbokeh ``physical``."""
-    specs = [SplitSpec("train", 1711, 64, a.size, a.spp, a.focus, a.background_detail),
-             SplitSpec("val", 1712, 8, a.size, a.spp, a.focus, a.background_detail),
-             SplitSpec("test", 1713, 24, a.size, a.spp, a.focus, a.background_detail)]
+    specs = [SplitSpec("train", 1711, 64, a.size, a.spp, a.focus, a.background_detail, a.perspective),
+             SplitSpec("val", 1712, 8, a.size, a.spp, a.focus, a.background_detail, a.perspective),
+             SplitSpec("test", 1713, 24, a.size, a.spp, a.focus, a.background_detail, a.perspective)]
     cfg = TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=8,
                       lr=a.lr, eval_every=10, threads=a.threads, highlights=a.highlights,
-                      init_disparity=a.init_disparity, inputs=a.inputs, **_prior_fields(a))
+                      init_disparity=a.init_disparity, inputs=a.inputs, vertical_flips=not a.perspective,
+                      **_prior_fields(a))
     a.out.mkdir(parents=True, exist_ok=True)
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")

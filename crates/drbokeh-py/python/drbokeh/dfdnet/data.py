@@ -46,6 +46,9 @@ class SplitSpec:
     spp: int
     focus: str = "far"
     background_detail: float = 0.0
+    # ``benchmark make --perspective``: foregrounds' size and height in the frame follow
+    # their depth, so the all-in-focus image carries a depth cue.
+    perspective: bool = False
 
 
 @dataclass
@@ -72,14 +75,14 @@ FOCUS = {"far": (2, 0.0), "near": (0, 1.0)}  # focus -> (shard of 3, disparity i
 
 def default_splits(
     size: int = 128, spp: int = 144, train: int = 240, val: int = 32, test: int = 64, focus: str = "far",
-    background_detail: float = 0.0,
+    background_detail: float = 0.0, perspective: bool = False,
 ) -> List[SplitSpec]:
     if focus not in FOCUS:
         raise ValueError(f"unknown focus {focus!r} (available: {', '.join(FOCUS)})")
     return [
-        SplitSpec("train", 1701, train, size, spp, focus, background_detail),
-        SplitSpec("val", 1702, val, size, spp, focus, background_detail),
-        SplitSpec("test", 1703, test, size, spp, focus, background_detail),
+        SplitSpec("train", 1701, train, size, spp, focus, background_detail, perspective),
+        SplitSpec("val", 1702, val, size, spp, focus, background_detail, perspective),
+        SplitSpec("test", 1703, test, size, spp, focus, background_detail, perspective),
     ]
 
 
@@ -109,6 +112,8 @@ def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1)
     ]
     if spec.background_detail > 0:
         cmd += ["--background-detail", str(spec.background_detail)]
+    if spec.perspective:
+        cmd += ["--perspective"]
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr.strip()}")
@@ -191,8 +196,9 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
     if record.exists():
         try:
             old = record.read_text()
-            # Caches from before the focus option are near focus; from before the detail option, without.
-            made = [{"focus": "near", "background_detail": 0.0, **r} for r in json.loads(old)]
+            # Caches from before the focus option are near focus; from before the detail or
+            # the perspective option, without.
+            made = [{"focus": "near", "background_detail": 0.0, "perspective": False, **r} for r in json.loads(old)]
         except (ValueError, TypeError) as e:
             raise ValueError(f"{record}: not a record of splits ({e}); delete it or use another --data directory") from None
         if made != want:
@@ -252,11 +258,13 @@ def with_min_blur(splits: Dict[str, Split], min_blur_px: float) -> Dict[str, Spl
 
 def random_crops(
     split: Split, indices: np.ndarray, crop: int, rng: np.random.Generator,
-    extra: Optional[Dict[str, np.ndarray]] = None,
+    extra: Optional[Dict[str, np.ndarray]] = None, vertical_flips: bool = True,
 ) -> Dict[str, np.ndarray]:
     """A batch of random ``crop x crop`` windows with random horizontal and vertical flips
     (the same for image, target and disparity, and for the ``(N, C, H, W)`` arrays in
-    ``extra``, returned under their keys). The random draws do not depend on ``extra``."""
+    ``extra``, returned under their keys). The random draws do not depend on ``extra``.
+    ``vertical_flips=False`` leaves the images upright (scenes with a ground, where height
+    in the frame says how far a thing is); the draws are the same either way."""
     h, w = split.aif.shape[-2:]
     arrays = {"aif": split.aif, "bokeh": split.bokeh, "disparity": split.disparity, **(extra or {})}
     out: Dict[str, List[np.ndarray]] = {k: [] for k in arrays}
@@ -264,6 +272,7 @@ def random_crops(
         y = int(rng.integers(0, h - crop + 1))
         x = int(rng.integers(0, w - crop + 1))
         fy, fx = bool(rng.integers(0, 2)), bool(rng.integers(0, 2))
+        fy = fy and vertical_flips
         for key in out:
             a = arrays[key][i, :, y : y + crop, x : x + crop]
             if fy:

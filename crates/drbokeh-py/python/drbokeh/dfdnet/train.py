@@ -125,6 +125,10 @@ class TrainConfig:
     focus_prior_radius_px: Optional[float] = None
     # What the network sees (INPUTS).
     inputs: str = "aif"
+    # Whether training crops are also flipped upside down. Off for scenes laid out on a
+    # ground (``--perspective``), whose height in the frame is a depth cue that a flip
+    # would invert (session 26, docs/dfdnet.md).
+    vertical_flips: bool = True
 
     def __post_init__(self) -> None:
         if self.inputs not in INPUTS:
@@ -271,7 +275,7 @@ def train_run(
             order, pos = rng.permutation(n), 0
         idx = order[pos : pos + cfg.batch]
         pos += cfg.batch
-        b = random_crops(train, idx, cfg.crop, rng, extra)
+        b = random_crops(train, idx, cfg.crop, rng, extra, cfg.vertical_flips)
         t0 = time.perf_counter()
         pred = model(torch.from_numpy(cfg.input_of(b["aif"], b["bokeh"])))
         if layer is None:
