@@ -96,14 +96,16 @@ pub const PERSPECTIVE_HEIGHT: (f64, f64) = (0.35, 0.75);
 /// +-0.03), so that depth stays readable from size and height.
 pub fn perspective_layout(t: f64, side_draw: f64, height_draw: f64) -> (f64, f64) {
     let lerp = |(a, b): (f64, f64)| a + (b - a) * t.clamp(0.0, 1.0);
+    // 0.575 is the middle of the side draw's range, so a middle draw leaves the side as is.
     let side = lerp(PERSPECTIVE_SIDE) * (side_draw / 0.575).powf(0.3);
     let height = lerp(PERSPECTIVE_HEIGHT) + 0.1 * (height_draw - 0.5);
     (side, height)
 }
 
-/// [`scene_spec`] with `content`'s highlights and background detail: the same geometry,
-/// focus, blur and random draws for every content (only the highlights' brightness and
-/// the background's detail change). The defaults are not written into the spec, so
+/// [`scene_spec`] with `content`'s highlights, background detail and layout: the same
+/// depths, focus, blur and random draws for every content (only the highlights'
+/// brightness, the background's detail and, with [`Content::perspective`], the
+/// foregrounds' sizes and places change). The defaults are not written into the spec, so
 /// standard scenes keep their `scene.json`.
 pub fn scene_spec_with_content(
     seed: u64,
