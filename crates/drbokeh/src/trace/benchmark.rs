@@ -20,7 +20,8 @@
 use super::procedural::{HighlightRange, ProceduralKind};
 use super::sampling::Rng;
 use super::scene::{
-    BillboardSpec, CameraSpec, LensSpec, RenderSpec, SceneSpec, TextureSpec, STANDARD_AIF_SPP,
+    normalised_disparity, BillboardSpec, CameraSpec, LensSpec, RenderSpec, SceneSpec, TextureSpec,
+    STANDARD_AIF_SPP,
 };
 use crate::Result;
 
@@ -178,9 +179,8 @@ pub fn scene_spec_with_content(
             break (all, focus_depth, aperture);
         }
     };
-    // Normalised disparity of a depth: 1 at the nearest billboard, 0 at the farthest.
+    // The nearest and farthest billboards (the foregrounds are sorted; the background is last).
     let (near, far) = (depths[0], depths[4]);
-    let disparity = |z: f64| (1.0 / z - 1.0 / far) / (1.0 / near - 1.0 / far);
     let mut billboards = Vec::new();
     for (k, &depth) in depths.iter().enumerate() {
         let (name, center, size, kind) = if k == 4 {
@@ -195,7 +195,8 @@ pub fn scene_spec_with_content(
             let aspect = rng.range(0.75, 1.33);
             let center = [rng.range(0.2, 0.8), rng.range(0.2, 0.8)];
             let (center, size) = if perspective {
-                let (side, height) = perspective_layout(disparity(depth), s, center[1]);
+                let (side, height) =
+                    perspective_layout(normalised_disparity(depth, near, far), s, center[1]);
                 ([center[0], height], [side, side])
             } else {
                 (center, [s * aspect.sqrt(), s / aspect.sqrt()])

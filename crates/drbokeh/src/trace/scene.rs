@@ -47,6 +47,12 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+/// Normalised disparity of a depth: `(1/z - 1/z_far) / (1/z_near - 1/z_far)` (1 at
+/// `near_mm`, 0 at `far_mm`; the two must differ).
+pub fn normalised_disparity(depth_mm: f64, near_mm: f64, far_mm: f64) -> f64 {
+    (1.0 / depth_mm - 1.0 / far_mm) / (1.0 / near_mm - 1.0 / far_mm)
+}
+
 /// The standard number of samples per pixel (pixel area x pupil).
 pub const STANDARD_SPP: usize = 1024;
 /// The standard number of pixel-area samples of the pinhole (all-in-focus) passes.
@@ -612,14 +618,14 @@ impl Scene {
         Ok(Scene { optics, billboards })
     }
 
-    /// Normalised disparity of a depth: `(1/z - 1/z_far) / (1/z_near - 1/z_far)` over the
-    /// scene's nearest and farthest billboards (1 = nearest, 0 = farthest).
+    /// Normalised disparity of a depth over the scene's nearest and farthest billboards
+    /// ([`normalised_disparity`]; 1 for a scene whose billboards share one depth).
     pub fn disparity_of_depth(&self, depth_mm: f64) -> f64 {
         let (near, far) = self.depth_range_mm();
         if near == far {
             return 1.0;
         }
-        (1.0 / depth_mm - 1.0 / far) / (1.0 / near - 1.0 / far)
+        normalised_disparity(depth_mm, near, far)
     }
 
     /// Depths of the nearest and farthest billboards, mm.
