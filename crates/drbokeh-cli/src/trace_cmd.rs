@@ -95,6 +95,8 @@ pub enum BenchmarkCommand {
 ///   drbokeh benchmark make --scenes 24 --seed 202 --size 256 \
 ///       --highlight-range 5:50 -o bench-bright
 ///   drbokeh benchmark make --scenes 480 --size 128 --perspective -o bench-cue
+///   drbokeh benchmark make --scenes 960 --size 128 --only-focus 0 \
+///       --min-blur 3 -o bench-far
 #[derive(Args, Debug)]
 #[command(verbatim_doc_comment)]
 pub struct MakeArgs {
@@ -140,6 +142,17 @@ pub struct MakeArgs {
     /// Make only the scenes with index % n == k.
     #[arg(long, value_name = "k/n")]
     pub shard: Option<String>,
+
+    /// Make only the scenes that focus at this normalised disparity (within 1e-6; 0 is the
+    /// background, 1 the nearest billboard). The others stay in the manifest, untraced,
+    /// as with --shard.
+    #[arg(long, value_name = "DISPARITY")]
+    pub only_focus: Option<f64>,
+
+    /// Make only the scenes whose blur K (the manifest's `blur`, px per unit of disparity)
+    /// is at least PX. The others stay in the manifest, untraced, as with --shard.
+    #[arg(long, value_name = "PX")]
+    pub min_blur: Option<f64>,
 
     /// Number of worker threads (default: all cores). Output does not depend on it.
     #[arg(long, value_name = "N")]
@@ -259,6 +272,16 @@ fn run_make(a: &MakeArgs) -> Result<()> {
         Some(s) => parse_shard(s)?,
         None => (0, 1),
     };
+    if let Some(f) = a.only_focus {
+        if !(0.0..=1.0).contains(&f) {
+            bail!("invalid parameter --only-focus: must be a disparity in [0, 1], got {f}");
+        }
+    }
+    if let Some(b) = a.min_blur {
+        if !(b.is_finite() && b >= 0.0) {
+            bail!("invalid parameter --min-blur: must be a blur in pixels, >= 0, got {b}");
+        }
+    }
     if a.scenes == 0 || a.scenes > 100_000 {
         bail!(
             "invalid parameter --scenes: must be between 1 and 100000, got {}",
@@ -340,7 +363,21 @@ fn run_make(a: &MakeArgs) -> Result<()> {
         w.write_all(text.as_bytes())
             .map_err(|e| drbokeh::Error::file(&manifest_path, format!("write failed: {e}")))
     })?;
-    let mine: Vec<usize> = (0..a.scenes).filter(|i| i % n == k).collect();
+    // --only-focus and --min-blur, read from the manifest entry (computed without tracing).
+    let wanted = |e: &serde_json::Value| {
+        let focus_ok = match a.only_focus {
+            Some(f) => matches!(e["focus"].as_f64(), Some(v) if (v - f).abs() <= 1e-6),
+            None => true,
+        };
+        let blur_ok = match a.min_blur {
+            Some(b) => matches!(e["blur"].as_f64(), Some(v) if v >= b),
+            None => true,
+        };
+        focus_ok && blur_ok
+    };
+    let mine: Vec<usize> = (0..a.scenes)
+        .filter(|&i| i % n == k && wanted(&entries[i]))
+        .collect();
     let start = Instant::now();
     let (mut made, mut skipped) = (0, 0);
     for (done, &i) in mine.iter().enumerate() {

@@ -248,6 +248,78 @@ fn benchmark_is_identical_for_any_sharding_and_thread_count_and_resumes() {
 }
 
 #[test]
+fn benchmark_traces_only_the_scenes_that_pass_only_focus_and_min_blur() {
+    let dir = tempfile::tempdir().unwrap();
+    let (full, some) = (dir.path().join("full"), dir.path().join("some"));
+    let make = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["benchmark", "make", "--output", out.to_str().unwrap()];
+        args.extend_from_slice(&[
+            "--scenes", "6", "--seed", "2", "--size", "24", "--spp", "16",
+        ]);
+        args.extend_from_slice(extra);
+        drbokeh(&args)
+    };
+    assert!(make(&full, &["-q"]).status.success());
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(full.join("manifest.json")).unwrap()).unwrap();
+    let entries = manifest["entries"].as_array().unwrap().clone();
+    // The threshold halfway up the blurs of the far-focus scenes (focus 0) keeps some, not all.
+    let far: Vec<&serde_json::Value> = entries
+        .iter()
+        .filter(|e| e["focus"].as_f64().unwrap().abs() <= 1e-6)
+        .collect();
+    assert!(far.len() >= 2, "seed 2 has {} far-focus scenes", far.len());
+    let mut blurs: Vec<f64> = far.iter().map(|e| e["blur"].as_f64().unwrap()).collect();
+    blurs.sort_by(f64::total_cmp);
+    let min_blur = 0.5 * (blurs[0] + blurs[blurs.len() - 1]);
+    let o = make(
+        &some,
+        &["--only-focus", "0", "--min-blur", &min_blur.to_string()],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let want: Vec<String> = far
+        .iter()
+        .filter(|e| e["blur"].as_f64().unwrap() >= min_blur)
+        .map(|e| e["dir"].as_str().unwrap().to_string())
+        .collect();
+    assert!(!want.is_empty() && want.len() < entries.len());
+    for e in &entries {
+        let name = e["dir"].as_str().unwrap();
+        let made = some.join(name);
+        if want.iter().any(|w| w == name) {
+            // The same bytes as in the full benchmark.
+            for f in ["aif.png", "bokeh.png", "scene.json"] {
+                assert_eq!(
+                    std::fs::read(made.join(f)).unwrap(),
+                    std::fs::read(full.join(name).join(f)).unwrap(),
+                    "{name}/{f}"
+                );
+            }
+        } else {
+            assert!(!made.exists(), "{name} should not be traced");
+        }
+    }
+    // The manifest still lists every scene.
+    assert_eq!(
+        std::fs::read(some.join("manifest.json")).unwrap(),
+        std::fs::read(full.join("manifest.json")).unwrap()
+    );
+    for (arg, msg) in [
+        (
+            "--only-focus=1.5",
+            "--only-focus: must be a disparity in [0, 1]",
+        ),
+        ("--min-blur=-1", "--min-blur: must be a blur in pixels"),
+        ("--min-blur=NaN", "--min-blur: must be a blur in pixels"),
+    ] {
+        let o = make(&dir.path().join("bad"), &[arg]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains(msg), "{}", stderr(&o));
+        assert!(!dir.path().join("bad").exists(), "nothing written on {arg}");
+    }
+}
+
+#[test]
 fn benchmark_refuses_to_resume_a_benchmark_made_with_other_parameters() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");

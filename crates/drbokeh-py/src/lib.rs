@@ -6,6 +6,7 @@
 mod convert;
 mod data;
 mod errors;
+mod layers;
 mod policy;
 mod pool;
 mod render;
@@ -26,6 +27,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::render_with_tape, m)?)?;
     m.add_function(wrap_pyfunction!(render::vjp, m)?)?;
     m.add_function(wrap_pyfunction!(render::time_library_render, m)?)?;
+    m.add_function(wrap_pyfunction!(layers::aperture_layer, m)?)?;
     m.add_function(wrap_pyfunction!(scene::render_image, m)?)?;
     m.add_function(wrap_pyfunction!(scene::decompose, m)?)?;
     m.add_function(wrap_pyfunction!(data::load_stack, m)?)?;

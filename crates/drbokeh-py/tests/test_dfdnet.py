@@ -207,6 +207,14 @@ def test_min_blur_keeps_the_scenes_with_enough_blur_in_every_split():
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="minimum blur"):
             with_min_blur(splits, bad)
+    # A cache traced with a threshold serves that threshold or more, never less.
+    traced = {"train": split([3.0, 9.0])}
+    traced["train"].traced_min_blur = 3.0
+    assert with_min_blur(traced, 4.0)["train"].names == ["s1"]
+    assert with_min_blur(traced, 4.0)["train"].traced_min_blur == 3.0
+    for less in (0.0, 2.5):
+        with pytest.raises(ValueError, match=r"holds only scenes with K >= 3.0 px"):
+            with_min_blur(traced, less)
     from drbokeh.dfdnet.__main__ import parse_args
 
     assert parse_args(["train", "--out", "o"]).min_blur == 0.0
@@ -401,7 +409,7 @@ def _np_aperture(aif, disp, focus, k, gamma=2.2):
     return out
 
 
-@pytest.mark.parametrize("name", ["gausspsf", "aperture"])
+@pytest.mark.parametrize("name", ["gausspsf", "aperture", "aperturepy"])
 def test_baseline_layers_match_the_rust_loops_and_have_gradients(name):
     aif = _rand(7, 10, 11, 3)
     disp = _rand(8, 10, 11)
@@ -416,6 +424,56 @@ def test_baseline_layers_match_the_rust_loops_and_have_gradients(name):
     # Gradients with respect to the disparity, against finite differences.
     small = (t_aif[..., :6, :7].clone(), t_disp[..., :6, :7].detach().clone().requires_grad_(True))
     assert torch.autograd.gradcheck(lambda d: layer(small[0], d, f, kk), (small[1],), eps=1e-6, atol=1e-5)
+
+
+def test_rust_aperture_layer_agrees_with_the_pytorch_reference_in_float32():
+    """``aperture`` (the Rust layer and its adjoint) against ``aperturepy`` (PyTorch's
+    grid_sample) on a float32 batch whose items differ in focus and blur, with a prediction
+    that reaches past the borders: the same render and the same disparity gradient, up to
+    float32 rounding; no gradient for the image; the same result on any thread count."""
+    rng = np.random.default_rng(21)
+    aif = torch.from_numpy(rng.uniform(0.0, 1.0, (2, 3, 24, 29)).astype(np.float32))
+    aif[0, :, 5:8, 5:8] = 1.6  # a restored highlight (the "energy" source) above white
+    disp = torch.from_numpy(rng.uniform(0.0, 1.0, (2, 1, 24, 29)).astype(np.float32))
+    focus, blur = torch.tensor([0.0, 0.7]), torch.tensor([9.0, 4.5])
+    grad_out = torch.from_numpy(rng.normal(size=(2, 3, 24, 29)).astype(np.float32))
+    results = []
+    for name in ("aperture", "aperturepy"):
+        d = disp.clone().requires_grad_(True)
+        a = aif.clone().requires_grad_(name == "aperture")
+        out = layers.make_layer(name)(a, d, focus, blur)
+        (out * grad_out).sum().backward()
+        if name == "aperture":
+            assert a.grad is None or float(a.grad.abs().max()) == 0.0
+        results.append((out.detach(), d.grad.detach()))
+    (out_rs, g_rs), (out_py, g_py) = results
+    assert out_rs.dtype == torch.float32 and out_rs.shape == out_py.shape
+    assert float((out_rs - out_py).abs().max()) < 2e-5
+    # The gradient jumps where a sample crosses a texel edge or the clamped border, and the
+    # two compute sample positions in other precisions (float64 in Rust, float32 here), so a
+    # sample that lands on such a kink may take the other side: a few pixels may differ by a
+    # sample's share; every other pixel agrees to rounding.
+    off = (g_rs - g_py).abs() > 1e-4 * float(g_py.abs().max())
+    assert int(off.sum()) <= max(1, off.numel() // 200), int(off.sum())
+    assert float(torch.linalg.norm(g_rs - g_py) / torch.linalg.norm(g_py)) < 2e-3
+    again = layers.make_layer("aperture", threads=2)(aif, disp, focus, blur)
+    assert torch.equal(again, out_rs)
+
+
+def test_rust_aperture_layer_rejects_bad_input_with_clear_messages():
+    from drbokeh import _native
+
+    img, disp = np.full((6, 7, 3), 0.5, np.float32), np.zeros((6, 7), np.float32)
+    with pytest.raises(ValueError, match="image is 7x6 but disparity is 8x6"):
+        _native.aperture_layer(img, np.zeros((6, 8), np.float32), focus=0.0, blur=3.0)
+    with pytest.raises(ValueError, match="disparity has a non-finite value"):
+        _native.aperture_layer(img, np.where(np.eye(6, 7) > 0, np.nan, 0).astype(np.float32), focus=0.0, blur=3.0)
+    with pytest.raises(ValueError, match="focus"):
+        _native.aperture_layer(img, disp, focus=1.5, blur=3.0)
+    with pytest.raises(ValueError, match="grad_output has shape"):
+        _native.aperture_layer(img, disp, focus=0.0, blur=3.0, grad_output=np.zeros((6, 7), np.float32))
+    with pytest.raises(ValueError, match="image has dtype"):
+        _native.aperture_layer(img.astype(np.int32), disp, focus=0.0, blur=3.0)
 
 
 def test_drbokeh_layer_renders_one_opaque_layer():
@@ -842,6 +900,39 @@ def test_quick_data_is_far_focus_only(quick_run):
         # The background, in focus, is at disparity 0 (to rounding); nothing is nearer than focus.
         per_scene_min = split.disparity.reshape(len(split), -1).min(1)
         assert np.all(np.abs(per_scene_min) < 1e-6), name
+
+
+def test_far_focus_data_traces_only_the_scenes_it_keeps(tmp_path):
+    """A far-focus split traces only the background-focused scenes (``benchmark make
+    --only-focus 0``) and, with ``min_blur``, only those with K >= it (``--min-blur``): the
+    cache holds exactly the scenes a full trace would keep at that threshold, with the same
+    arrays, records the threshold, and refuses a smaller one."""
+    from drbokeh.dfdnet.data import SplitSpec, load_benchmark_dir, make_benchmark, prepare, with_min_blur
+
+    spec = SplitSpec("train", 1711, 6, 16, 4, "far")
+    cli = str(_find_cli())
+    full_dir = tmp_path / "full"
+    subprocess.run([cli, "benchmark", "make", "--scenes", "18", "--shard", "2/3", "--seed", "1711", "--size", "16",
+                    "--spp", "4", "--threads", "1", "--output", str(full_dir), "-q"], check=True)
+    full = load_benchmark_dir(full_dir, "far")
+    assert len(full) >= 2, "seed 1711 has fewer than two far-focus scenes"
+    min_blur = float(np.sort(full.blur)[len(full) // 2])
+    got = prepare(tmp_path / "cache", [spec], cli=cli, min_blur=min_blur)["train"]
+    assert got.traced_min_blur == min_blur
+    want = [i for i in range(len(full)) if full.blur[i] >= min_blur]
+    assert 0 < len(want) < len(full)
+    assert got.names == [full.names[i] for i in want]
+    assert np.array_equal(got.aif, full.aif[want]) and np.array_equal(got.bokeh, full.bokeh[want])
+    traced = sorted(p.name for p in (tmp_path / "cache" / "train").iterdir() if p.is_dir())
+    assert traced == got.names, "a scene that is not kept was traced"
+    again = prepare(tmp_path / "cache", [spec], cli="/nonexistent/drbokeh")["train"]  # from the cache
+    assert again.traced_min_blur == min_blur and again.names == got.names
+    with pytest.raises(ValueError, match="holds only scenes"):
+        with_min_blur({"train": again}, 0.0)
+    # Without a threshold every far-focus scene is traced, and only those.
+    make_benchmark(spec, tmp_path / "far", cli)
+    made = sorted(p.name for p in (tmp_path / "far").iterdir() if p.is_dir())
+    assert made == full.names
 
 
 def test_background_detail_reaches_the_traced_scenes_and_the_cache_record(tmp_path):

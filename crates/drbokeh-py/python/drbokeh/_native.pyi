@@ -2,7 +2,7 @@
 
 import os
 import pathlib
-from typing import Any, Dict, List, Literal, Optional, Tuple, Union
+from typing import Any, Dict, List, Literal, Optional, Tuple, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -171,6 +171,36 @@ def render_image(
     recovered as the command line's default does (``--highlight auto``, docs/highlights.md);
     ``highlight=True`` uses the paper's boost alone (``--highlight``). Notes are issued as
     :class:`DrBokehWarning`."""
+
+@overload
+def aperture_layer(
+    image: FloatArray,
+    disparity: FloatArray,
+    *,
+    focus: float,
+    blur: float,
+    gamma: float = 2.2,
+    grad_output: None = None,
+    threads: Optional[int] = None,
+) -> np.ndarray: ...
+@overload
+def aperture_layer(
+    image: FloatArray,
+    disparity: FloatArray,
+    *,
+    focus: float,
+    blur: float,
+    gamma: float = 2.2,
+    grad_output: FloatArray,
+    threads: Optional[int] = None,
+) -> Tuple[np.ndarray, np.ndarray]:
+    """Aperture compositing (Srinivasan et al. 2018) as a rendering layer: ``image``
+    ``(H, W, 3)`` (display-encoded) resampled bilinearly, borders clamped, at
+    ``x + blur (disparity(x) - focus) u_j`` for 128 golden-angle samples ``u_j`` of the
+    unit disc, averaged in linear light (``encoded ** gamma``) and encoded again. Returns
+    the render ``(H, W, 3)``; with ``grad_output`` ``(H, W, 3)``, ``(render, d_disparity)``
+    where ``d_disparity`` ``(H, W)`` is the gradient of ``sum(grad_output * render)`` with
+    respect to ``disparity``. float64 if any array is, float32 otherwise."""
 
 def decompose(
     image: FloatArray,

@@ -203,7 +203,7 @@ def _runs(a: argparse.Namespace) -> List[RunSpec]:
 def _splits(a: argparse.Namespace) -> Dict[str, Split]:
     """Every split, traced into --data if missing, with the scenes below --min-blur left out."""
     try:
-        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log)
+        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log, min_blur=a.min_blur)
     except ValueError as e:
         raise SystemExit(f"--data: {e}")
     try:

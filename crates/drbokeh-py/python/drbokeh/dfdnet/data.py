@@ -65,6 +65,9 @@ class Split:
     near_mm: np.ndarray
     far_mm: np.ndarray
     names: List[str]
+    # The cache was traced with only the scenes whose blur K is at least this (px): a
+    # smaller --min-blur cannot be served from it (:func:`with_min_blur`).
+    traced_min_blur: float = 0.0
 
     def __len__(self) -> int:
         return int(self.aif.shape[0])
@@ -103,8 +106,11 @@ def find_cli(explicit: Optional[str] = None) -> str:
     )
 
 
-def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1) -> None:
-    """Runs ``drbokeh benchmark make`` (resumable: scenes already there are kept)."""
+def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1, min_blur: float = 0.0) -> None:
+    """Runs ``drbokeh benchmark make`` (resumable: scenes already there are kept). With
+    ``far`` focus only the scenes focused on the background are traced (the others would
+    be skipped by :func:`load_benchmark_dir`), and with ``min_blur`` only those whose blur K
+    is at least that many pixels."""
     cmd = [
         cli, "benchmark", "make", "--scenes", str(3 * spec.count), "--shard", f"{FOCUS[spec.focus][0]}/3",
         "--seed", str(spec.seed), "--size", str(spec.size), "--spp", str(spec.spp),
@@ -114,6 +120,10 @@ def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1)
         cmd += ["--background-detail", str(spec.background_detail)]
     if spec.perspective:
         cmd += ["--perspective"]
+    if spec.focus == "far":
+        cmd += ["--only-focus", "0"]
+    if min_blur > 0:
+        cmd += ["--min-blur", repr(float(min_blur))]
     p = subprocess.run(cmd, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr.strip()}")
@@ -161,6 +171,7 @@ def _save(split: Split, path: Path) -> None:
     np.savez(
         tmp, aif=split.aif, bokeh=split.bokeh, disparity=split.disparity, focus=split.focus,
         blur=split.blur, near_mm=split.near_mm, far_mm=split.far_mm, names=np.array(split.names),
+        traced_min_blur=np.float64(split.traced_min_blur),
     )
     tmp.replace(path)
 
@@ -173,6 +184,8 @@ def _load(path: Path) -> Split:
             split = Split(
                 z["aif"], z["bokeh"], z["disparity"], z["focus"], z["blur"], z["near_mm"], z["far_mm"],
                 [str(n) for n in z["names"]],
+                # caches from before the option hold every scene
+                float(z["traced_min_blur"]) if "traced_min_blur" in z.files else 0.0,
             )
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
         raise ValueError(f"{path}: not a cached split ({type(e).__name__}: {e}); delete it to trace it again") from None
@@ -183,9 +196,14 @@ def _load(path: Path) -> Split:
     return split
 
 
-def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = None, threads: int = 1, log=print) -> Dict[str, Split]:
+def prepare(
+    data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = None, threads: int = 1, log=print,
+    min_blur: float = 0.0,
+) -> Dict[str, Split]:
     """Makes (if missing) and loads every split, cached as ``data_dir/<name>.npz``; the
-    ray-traced scenes stay in ``data_dir/<name>/``. ``data_dir/splits.json`` records the
+    ray-traced scenes stay in ``data_dir/<name>/``. A split made here traces only the scenes
+    with blur K >= ``min_blur`` px (the cache records it; :func:`with_min_blur` refuses a
+    smaller threshold on it). ``data_dir/splits.json`` records the
     specs; a cache made with other specs is an error (delete it or use another
     directory)."""
     data_dir.mkdir(parents=True, exist_ok=True)
@@ -216,8 +234,9 @@ def prepare(data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = Non
             import time
 
             t0 = time.perf_counter()
-            make_benchmark(spec, data_dir / spec.name, find_cli(cli), threads)
+            make_benchmark(spec, data_dir / spec.name, find_cli(cli), threads, min_blur)
             split = load_benchmark_dir(data_dir / spec.name, spec.focus)
+            split.traced_min_blur = float(min_blur)
             _save(split, cache)
             log(f"data: {spec.name}: {len(split)} scenes at {spec.size} px in {time.perf_counter() - t0:.0f} s")
         out[spec.name] = _load(cache)
@@ -229,7 +248,7 @@ def subset(split: Split, keep: np.ndarray) -> Split:
     idx = np.flatnonzero(keep)
     return Split(
         split.aif[idx], split.bokeh[idx], split.disparity[idx], split.focus[idx], split.blur[idx],
-        split.near_mm[idx], split.far_mm[idx], [split.names[i] for i in idx],
+        split.near_mm[idx], split.far_mm[idx], [split.names[i] for i in idx], split.traced_min_blur,
     )
 
 
@@ -243,8 +262,16 @@ def check_min_blur(min_blur_px: float) -> float:
 def with_min_blur(splits: Dict[str, Split], min_blur_px: float) -> Dict[str, Split]:
     """Every split with only its scenes whose largest blur K is at least ``min_blur_px``
     pixels (all of them for 0). A split left with no scene is an error, and so is a
-    negative or non-finite threshold (:func:`check_min_blur`)."""
-    if check_min_blur(min_blur_px) == 0.0:
+    negative or non-finite threshold (:func:`check_min_blur`), and so is a threshold below
+    the one a split's cache was traced with (it lacks the scenes in between)."""
+    check_min_blur(min_blur_px)
+    for name, split in splits.items():
+        if min_blur_px < split.traced_min_blur:
+            raise ValueError(
+                f"minimum blur {min_blur_px} px: the cached {name} split holds only scenes with K >= "
+                f"{split.traced_min_blur} px; use that threshold or more, or another --data directory"
+            )
+    if min_blur_px == 0.0:
         return dict(splits)
     out: Dict[str, Split] = {}
     for name, split in splits.items():

@@ -19,10 +19,14 @@ the display-encoded defocused image ``(B, 3, H, W)``.
   normalised over in-image sources, ``out(x) = sum_y w I(y) / sum_y w``,
   ``w = exp(-|x-y|^2 / (2 sigma_y^2)) / sigma_y^2``, in linear light; the gather radius is
   three standard deviations of the largest Gaussian of the disparity (of the batch).
-- ``aperture``: aperture compositing (Srinivasan et al. 2018) as
-  ``baselines/aperture_compositing.rs``: the image resampled (bilinear, clamped borders) at
-  ``x + K d(x) u_j`` for 128 golden-angle spiral samples ``u_j`` of the unit disc and
-  averaged in linear light.
+- ``aperture``: aperture compositing (Srinivasan et al. 2018), the image resampled
+  (bilinear, clamped borders) at ``x + K d(x) u_j`` for 128 golden-angle spiral samples
+  ``u_j`` of the unit disc and averaged in linear light: the Rust layer
+  ``baselines/aperture_compositing.rs`` and its adjoint (``_native.aperture_layer``).
+- ``aperturepy``: the same in PyTorch (``grid_sample``), the plain reference the Rust
+  layer is tested against, and the layer every ``aperture`` run of docs/dfdnet.md up to
+  session 28 was trained through (a training step at batch 4, 128 px, about 1.2x the
+  Rust layer's; docs/dfdnet.md, "Session 28").
 
 Here ``d = disparity - focus``. ``tests/test_dfdnet.py`` checks the two PyTorch baselines
 against the Rust ones (``drbokeh eval``'s renders are not exposed to Python, so against a
@@ -134,6 +138,48 @@ def aperture(aif: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, bl
     sampled = F.grid_sample(lin, grid, mode="bilinear", padding_mode="border", align_corners=True)
     out = sampled.view(b, 3, h, w, s).mean(-1)
     return encode(out)
+
+
+class _ApertureRust(torch.autograd.Function):
+    """The aperture layer through ``_native.aperture_layer``, item by item: the forward
+    renders, the backward calls the layer's adjoint (which renders again) for the gradient
+    with respect to the disparity only; the image gets none (it is the network's input)."""
+
+    @staticmethod
+    def forward(ctx, aif: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor, threads: int) -> torch.Tensor:  # type: ignore[override]
+        from .. import _native
+
+        img = aif.detach().permute(0, 2, 3, 1).contiguous().numpy()
+        disp = disparity.detach()[:, 0].contiguous().numpy()
+        f = [float(v) for v in focus]
+        k = [float(v) for v in blur]
+        out = [
+            _native.aperture_layer(img[i], disp[i], focus=f[i], blur=k[i], gamma=GAMMA, threads=threads)
+            for i in range(img.shape[0])
+        ]
+        ctx.inputs = (img, disp, f, k, threads)
+        return torch.from_numpy(np.stack(out)).permute(0, 3, 1, 2).to(aif.dtype)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):  # type: ignore[override]
+        from .. import _native
+
+        img, disp, f, k, threads = ctx.inputs
+        g = grad.detach().permute(0, 2, 3, 1).contiguous().numpy().astype(img.dtype, copy=False)
+        d = [
+            _native.aperture_layer(img[i], disp[i], focus=f[i], blur=k[i], gamma=GAMMA, grad_output=g[i], threads=threads)[1]
+            for i in range(img.shape[0])
+        ]
+        return None, torch.from_numpy(np.stack(d)).unsqueeze(1).to(grad.dtype), None, None, None
+
+
+def aperture_rust(threads: int = 1) -> Layer:
+    """The ``aperture`` layer: :func:`aperture` computed by the Rust layer and its adjoint."""
+
+    def render(aif: torch.Tensor, disparity: torch.Tensor, focus: torch.Tensor, blur: torch.Tensor) -> torch.Tensor:
+        return _ApertureRust.apply(aif, disparity, focus, blur, threads)
+
+    return render
 
 
 def drbokeh_layer(preset: str, threads: int = 1) -> Layer:
@@ -286,7 +332,7 @@ def drbokeh_occlusion_layer(
 
 
 LAYERS = (
-    "physical", "paper", "gausspsf", "aperture", "physical3", "paper3", "physical5", "paper5", "physical3m", "paper3m",
+    "physical", "paper", "gausspsf", "aperture", "aperturepy", "physical3", "paper3", "physical5", "paper5", "physical3m", "paper3m",
 )
 
 # The membership width of the movable stacks (``physical3m``, ``paper3m``), in disparity.
@@ -300,7 +346,8 @@ def make_layer(name: str, threads: int = 1) -> Layer:
         "physical": lambda: drbokeh_layer("physical", threads),
         "paper": lambda: drbokeh_layer("paper", threads),
         "gausspsf": lambda: gausspsf,
-        "aperture": lambda: aperture,
+        "aperture": lambda: aperture_rust(threads),
+        "aperturepy": lambda: aperture,
         # the drbokeh layers through the prediction's layer stack (at most 3 depth layers)
         "physical3": lambda: drbokeh_occlusion_layer("physical", 3, threads),
         "paper3": lambda: drbokeh_occlusion_layer("paper", 3, threads),
