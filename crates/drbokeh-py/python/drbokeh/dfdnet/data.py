@@ -121,7 +121,7 @@ def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1,
     if spec.perspective:
         cmd += ["--perspective"]
     if spec.focus == "far":
-        cmd += ["--only-focus", "0"]
+        cmd += ["--only-focus", repr(FOCUS["far"][1])]
     if min_blur > 0:
         cmd += ["--min-blur", repr(float(min_blur))]
     p = subprocess.run(cmd, capture_output=True, text=True)
