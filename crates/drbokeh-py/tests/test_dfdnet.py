@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 
@@ -871,6 +872,7 @@ def test_reproduce_over_seeds_is_one_command(tmp_path):
     p = subprocess.run([sys.executable, "-m", "drbokeh.dfdnet", "reproduce", "--out", str(out), "--seeds", "1,2", *args],
                        capture_output=True, text=True, env=env, timeout=600)
     assert p.returncode == 0, p.stderr + p.stdout
+    assert re.search(r"reproduce: [0-9.]+ min wall in all", p.stdout + p.stderr), "no total time reported"
     assert (out / "data").is_dir() and not (out / "seed1" / "data").exists()
     for seed in (1, 2):
         log = json.loads((out / f"seed{seed}" / "gausspsf-l1g" / "log.json").read_text())
@@ -929,6 +931,11 @@ def test_far_focus_data_traces_only_the_scenes_it_keeps(tmp_path):
     assert again.traced_min_blur == min_blur and again.names == got.names
     with pytest.raises(ValueError, match="holds only scenes"):
         with_min_blur({"train": again}, 0.0)
+    # A threshold no scene reaches: one line naming the split's directory and the threshold,
+    # and no cache.
+    with pytest.raises(ValueError, match=r"none/train: no traced scene .*K >= 1000.0 px"):
+        prepare(tmp_path / "none", [spec], cli=cli, min_blur=1000.0)
+    assert not (tmp_path / "none" / "train.npz").exists()
     # Without a threshold every far-focus scene is traced, and only those.
     make_benchmark(spec, tmp_path / "far", cli)
     made = sorted(p.name for p in (tmp_path / "far").iterdir() if p.is_dir())

@@ -135,7 +135,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
     p.add_argument("--val-scenes", type=int, default=32)
     p.add_argument("--test-scenes", type=int, default=64)
-    p.add_argument("--threads", type=int, default=1, help="torch and renderer threads (default 1: on a shared machine two processes of one thread beat one of two)")
+    p.add_argument("--threads", type=int, default=1, help="torch and renderer threads per run (default 1: on a shared machine two processes of one thread beat one of two); tracing the data uses --jobs x --threads")
     p.add_argument("--steps", type=int, default=None,
                    help=f"training steps per run (default {TrainConfig.steps}; {QUICK['steps']} with --quick)")
     p.add_argument("--batch", type=int, default=None,
@@ -201,9 +201,12 @@ def _runs(a: argparse.Namespace) -> List[RunSpec]:
 
 
 def _splits(a: argparse.Namespace) -> Dict[str, Split]:
-    """Every split, traced into --data if missing, with the scenes below --min-blur left out."""
+    """Every split, traced into --data if missing, with the scenes below --min-blur left out.
+    Tracing uses the cores the trainings will (``--jobs`` x ``--threads``); its bytes do not
+    depend on the thread count."""
+    trace_threads = a.threads * max(1, a.jobs)
     try:
-        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, a.threads, _log, min_blur=a.min_blur)
+        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, trace_threads, _log, min_blur=a.min_blur)
     except ValueError as e:
         raise SystemExit(f"--data: {e}")
     try:
@@ -403,14 +406,17 @@ def main(argv: Optional[List[str]] = None) -> int:
     if a.cmd == "train" and a.quick:
         _quick(a)
         return 0
+    start = time.monotonic()
     if a.cmd == "reproduce" and a.seeds:
         _reproduce_seeds(a)
-        return 0
-    runs, cfg = _runs(a), _cfg(a)
-    if a.cmd in ("train", "reproduce"):
-        _train(a, runs, cfg)
-    if a.cmd in ("eval", "reproduce"):
-        _eval(a, runs, cfg)
+    else:
+        runs, cfg = _runs(a), _cfg(a)
+        if a.cmd in ("train", "reproduce"):
+            _train(a, runs, cfg)
+        if a.cmd in ("eval", "reproduce"):
+            _eval(a, runs, cfg)
+    if a.cmd == "reproduce":
+        _log(f"reproduce: {(time.monotonic() - start) / 60:.1f} min wall in all (data, training, eval)")
     return 0
 
 

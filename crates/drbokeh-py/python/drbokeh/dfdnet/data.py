@@ -129,13 +129,18 @@ def make_benchmark(spec: SplitSpec, directory: Path, cli: str, threads: int = 1,
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{p.stderr.strip()}")
 
 
-def load_benchmark_dir(directory: Path, focus: str = "near") -> Split:
+def load_benchmark_dir(directory: Path, focus: str = "near", why_empty: str = "") -> Split:
     """The scenes of ``directory`` that focus at ``focus`` (``near``: every scene must
     focus at disparity 1; ``far``: the scenes focused at disparity 0, the background, are
-    kept, the others, focused on the farthest foreground, skipped)."""
+    kept, the others, focused on the farthest foreground, skipped). No such scene is a
+    ``ValueError`` naming the directory, with ``why_empty`` appended."""
     import drbokeh
 
     want = FOCUS[focus][1]
+    empty = f"{directory}: no traced scene focuses at disparity {want} ({focus} focus){why_empty}"
+    directory = Path(directory)
+    if directory.is_dir() and not any((p / "scene.json").is_file() for p in directory.iterdir()):
+        raise ValueError(empty)  # a manifest whose every scene was filtered out when traced
     aif, bokeh, disp, focus_, blur, near, far, names = [], [], [], [], [], [], [], []
     for scene in drbokeh.load_benchmark(directory):
         f = float(scene["camera"]["focus"])
@@ -152,6 +157,8 @@ def load_benchmark_dir(directory: Path, focus: str = "near") -> Split:
         near.append(float(record["disparity_near_depth_mm"]))
         far.append(float(record["disparity_far_depth_mm"]))
         names.append(str(scene["name"]))
+    if not names:
+        raise ValueError(empty)
     f32 = np.float32
     return Split(
         np.stack(aif).astype(f32), np.stack(bokeh).astype(f32), np.stack(disp).astype(f32),
@@ -235,7 +242,8 @@ def prepare(
 
             t0 = time.perf_counter()
             make_benchmark(spec, data_dir / spec.name, find_cli(cli), threads, min_blur)
-            split = load_benchmark_dir(data_dir / spec.name, spec.focus)
+            why = f"; only scenes with a blur K >= {min_blur} px were traced: lower the minimum blur" if min_blur > 0 else ""
+            split = load_benchmark_dir(data_dir / spec.name, spec.focus, why)
             split.traced_min_blur = float(min_blur)
             _save(split, cache)
             log(f"data: {spec.name}: {len(split)} scenes at {spec.size} px in {time.perf_counter() - t0:.0f} s")
