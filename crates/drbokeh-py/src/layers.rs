@@ -73,11 +73,9 @@ fn run<'py, T: Float>(
             g.width, g.height, rgb.width, rgb.height
         )));
     }
-    let upstream = |_: &Image<T>| Ok(g);
+    // One pass: the gradient is known before the render.
     let v = py
-        .detach(|| {
-            workers.run(|| aperture_compositing::render_vjp(&rgb, &disp, s, false, upstream))
-        })
+        .detach(|| workers.run(|| aperture_compositing::vjp(&rgb, &disp, s, false, &g)))
         .or_raise()?;
     Ok(PyTuple::new(
         py,

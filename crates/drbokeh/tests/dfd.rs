@@ -128,6 +128,55 @@ fn baseline_colour_gradients_match_finite_differences() {
     }
 }
 
+/// `aperture_compositing::vjp` (the gradient given beforehand, one pass) is the same bytes
+/// as `render` for the render and as `render_vjp` for both gradients, in f64 and f32, with
+/// samples on and past the clamped border (K 6 on an 11x9 image), and refuses a gradient
+/// of another size.
+#[test]
+fn aperture_one_pass_vjp_is_the_same_bytes_as_render_and_render_vjp() {
+    fn check<T: drbokeh::Real>(aif: Image<T>, disp: Image<T>, g: Image<T>, s: &RenderSettings) {
+        let render = aperture_compositing::render(&aif, &disp, s).unwrap();
+        let gc = g.clone();
+        let two = aperture_compositing::render_vjp(&aif, &disp, s, true, move |_| Ok(gc)).unwrap();
+        let one = aperture_compositing::vjp(&aif, &disp, s, true, &g).unwrap();
+        assert_eq!(one.render.data, render.data, "render");
+        assert_eq!(two.render.data, render.data, "render_vjp's render");
+        assert_eq!(
+            one.d_disparity.data, two.d_disparity.data,
+            "disparity gradient"
+        );
+        assert_eq!(
+            one.d_rgb.unwrap().data,
+            two.d_rgb.unwrap().data,
+            "colour gradient"
+        );
+        assert!(one.d_disparity.data.iter().any(|v| v.f64().abs() > 1e-4));
+        let small = Image::from_vec(
+            aif.width - 1,
+            aif.height,
+            3,
+            g.data[..g.data.len() - 3 * aif.height].to_vec(),
+        )
+        .unwrap();
+        let err = aperture_compositing::vjp(&aif, &disp, s, false, &small).unwrap_err();
+        assert!(err.to_string().contains("upstream gradient"), "{err}");
+    }
+    let (aif, disp, g) = pair(21, 11, 9);
+    let mut s = RenderSettings::physical(0.4);
+    s.camera.blur_k = 6.0;
+    let f32_of = |im: &Image<f64>| {
+        Image::from_vec(
+            im.width,
+            im.height,
+            im.channels,
+            im.data.iter().map(|&v| v as f32).collect(),
+        )
+        .unwrap()
+    };
+    check(f32_of(&aif), f32_of(&disp), f32_of(&g), &s);
+    check(aif, disp, g, &s);
+}
+
 /// A 64x64 piecewise-planar scene rendered by our renderer (K = 10, focus 1): optimising
 /// through the same renderer recovers its disparity. This is the optimiser's sanity check,
 /// so it runs with the paper's loss weights (G 0.5) and without the weighted-median

@@ -126,14 +126,58 @@ pub fn render_vjp<T: Real>(
     let out = forward(aif, disparity, settings);
     let g = upstream(&out)?;
     super::check_upstream(&out, &g)?;
+    let (_, d_disparity, d_rgb) = backward(aif, disparity, settings, colour_gradient, &g)?;
+    Ok(LayerVjp {
+        render: out,
+        d_disparity,
+        d_rgb,
+    })
+}
+
+/// The vector-Jacobian product for a gradient `g` on the render known beforehand (a
+/// training step's backward pass, whose forward pass already rendered): the render (the
+/// same bytes as [`render`]) and the gradients of `sum(g * render)` with respect to the
+/// disparity and (when `colour_gradient`) the encoded colour, in one pass over the
+/// samples instead of [`render_vjp`]'s two.
+pub fn vjp<T: Real>(
+    aif: &Image<T>,
+    disparity: &Image<T>,
+    settings: &RenderSettings,
+    colour_gradient: bool,
+    g: &Image<T>,
+) -> Result<LayerVjp<T>> {
+    check_pair(aif, disparity)?;
+    settings.camera.validate()?;
+    // The render has the image's size and channels.
+    super::check_upstream(aif, g)?;
+    let (render, d_disparity, d_rgb) = backward(aif, disparity, settings, colour_gradient, g)?;
+    Ok(LayerVjp {
+        render,
+        d_disparity,
+        d_rgb,
+    })
+}
+
+/// One pass over every receiver's samples: the render (accumulated as [`forward`] does,
+/// so the same bytes), the disparity gradient of `sum(g * render)` and, when
+/// `colour_gradient`, the encoded colour's.
+#[allow(clippy::type_complexity)]
+fn backward<T: Real>(
+    aif: &Image<T>,
+    disparity: &Image<T>,
+    settings: &RenderSettings,
+    colour_gradient: bool,
+    g: &Image<T>,
+) -> Result<(Image<T>, Image<T>, Option<Image<T>>)> {
     let (w, h) = (aif.width, aif.height);
     let tone = settings.tone();
     let lin = linear_rgb(aif, &tone);
     let samples = aperture_samples(APERTURE_SAMPLES);
     let n = samples.len() as f64;
     let (k, f) = (settings.camera.blur_k, settings.camera.focus_disparity);
-    // Per receiver: the gradient on its disparity, and on its mean linear colour.
-    let per: Vec<(T, [T; 3])> = (0..w * h)
+    // Per receiver: its encoded render, the gradient on its disparity, and on its mean
+    // linear colour.
+    let per: Vec<([T; 3], T, [T; 3])> = (0..w * h)
         .into_par_iter()
         .map(|i| {
             let shift = k * (disparity.data[i].f64() - f);
@@ -158,18 +202,18 @@ pub fn render_vjp<T: Real>(
                     dacc[c] = dacc[c] + (gx[c] * T::c(ux) + gy[c] * T::c(vy)) * T::c(k);
                 }
             }
-            let g_lin =
-                [0, 1, 2].map(|c| g.data[3 * i + c] * tone.encode_derivative(acc[c] / T::c(n)));
+            let mean = acc.map(|v| v / T::c(n));
+            let g_lin = [0, 1, 2].map(|c| g.data[3 * i + c] * tone.encode_derivative(mean[c]));
             let mut total = T::zero();
             for c in 0..3 {
                 total = total + g_lin[c] * dacc[c] / T::c(n);
             }
-            (total, g_lin)
+            (mean.map(|v| tone.encode(v)), total, g_lin)
         })
         .collect();
-    let grad: Vec<T> = per.iter().map(|p| p.0).collect();
-    let g_lin: Vec<[T; 3]> = per.iter().map(|p| p.1).collect();
-    let d_disparity = Image::from_vec(w, h, 1, grad)?;
+    let render = Image::from_vec(w, h, 3, per.iter().flat_map(|p| p.0).collect())?;
+    let d_disparity = Image::from_vec(w, h, 1, per.iter().map(|p| p.1).collect())?;
+    let g_lin: Vec<[T; 3]> = per.iter().map(|p| p.2).collect();
     let d_rgb = if colour_gradient {
         // Scatter each sample's bilinear weights onto its four source pixels, in a fixed
         // (serial) order, so the sum is deterministic.
@@ -193,9 +237,5 @@ pub fn render_vjp<T: Real>(
     } else {
         None
     };
-    Ok(LayerVjp {
-        render: out,
-        d_disparity,
-        d_rgb,
-    })
+    Ok((render, d_disparity, d_rgb))
 }
