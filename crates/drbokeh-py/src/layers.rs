@@ -5,7 +5,8 @@
 //! this is tested against).
 
 use crate::convert::{image_to_py, ArrayArg, Float, Precision};
-use crate::errors::{value_error, OrRaise};
+use crate::errors::OrRaise;
+use crate::policy::check_same_size;
 use crate::pool::Workers;
 use drbokeh::baselines::aperture_compositing;
 use drbokeh::presets::RenderSettings;
@@ -23,22 +24,6 @@ fn settings(focus: f64, blur: f64, gamma: f64) -> PyResult<RenderSettings> {
     Ok(s)
 }
 
-/// Fails unless every value of `img` (the argument `name`) is finite.
-fn check_finite<T: Float>(name: &str, img: &Image<T>) -> PyResult<()> {
-    match img.data.iter().position(|v| !v.f64().is_finite()) {
-        None => Ok(()),
-        Some(k) => {
-            let px = k / img.channels;
-            Err(value_error(format!(
-                "{name} has a non-finite value ({}) at pixel (x {}, y {})",
-                img.data[k].f64(),
-                px % img.width,
-                px / img.width
-            )))
-        }
-    }
-}
-
 /// Renders (and, with `grad_output`, back-propagates) one image in precision `T`.
 fn run<'py, T: Float>(
     py: Python<'py>,
@@ -50,14 +35,9 @@ fn run<'py, T: Float>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let rgb = image.image::<T>(3)?;
     let disp = disparity.image::<T>(1)?;
-    check_finite(image.name, &rgb)?;
-    check_finite(disparity.name, &disp)?;
-    if (rgb.width, rgb.height) != (disp.width, disp.height) {
-        return Err(value_error(format!(
-            "image is {}x{} but disparity is {}x{} (W x H): they must be one size",
-            rgb.width, rgb.height, disp.width, disp.height
-        )));
-    }
+    rgb.check_finite(image.name).or_raise()?;
+    disp.check_finite(disparity.name).or_raise()?;
+    check_same_size(image.name, &rgb, disparity.name, &disp)?;
     let Some(g) = grad_output else {
         let out = py
             .detach(|| workers.run(|| aperture_compositing::render(&rgb, &disp, s)))
@@ -66,13 +46,8 @@ fn run<'py, T: Float>(
     };
     let name = g.name;
     let g = g.image::<T>(3)?;
-    check_finite(name, &g)?;
-    if (g.width, g.height) != (rgb.width, rgb.height) {
-        return Err(value_error(format!(
-            "grad_output is {}x{} but the image is {}x{} (W x H): they must be one size",
-            g.width, g.height, rgb.width, rgb.height
-        )));
-    }
+    g.check_finite(name).or_raise()?;
+    check_same_size(image.name, &rgb, name, &g)?;
     // One pass: the gradient is known before the render.
     let v = py
         .detach(|| workers.run(|| aperture_compositing::vjp(&rgb, &disp, s, false, &g)))

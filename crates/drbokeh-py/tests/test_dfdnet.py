@@ -465,14 +465,20 @@ def test_rust_aperture_layer_rejects_bad_input_with_clear_messages():
     from drbokeh import _native
 
     img, disp = np.full((6, 7, 3), 0.5, np.float32), np.zeros((6, 7), np.float32)
-    with pytest.raises(ValueError, match="image is 7x6 but disparity is 8x6"):
+    # The messages are the library's, as every other binding gives them.
+    with pytest.raises(ValueError, match=r"disparity: size 8x6 does not match image \(7x6\)"):
         _native.aperture_layer(img, np.zeros((6, 8), np.float32), focus=0.0, blur=3.0)
-    with pytest.raises(ValueError, match="disparity has a non-finite value"):
+    with pytest.raises(ValueError, match=r"disparity: non-finite value \(NaN\) at pixel x=0, y=0"):
         _native.aperture_layer(img, np.where(np.eye(6, 7) > 0, np.nan, 0).astype(np.float32), focus=0.0, blur=3.0)
     with pytest.raises(ValueError, match="focus"):
         _native.aperture_layer(img, disp, focus=1.5, blur=3.0)
     with pytest.raises(ValueError, match="grad_output has shape"):
         _native.aperture_layer(img, disp, focus=0.0, blur=3.0, grad_output=np.zeros((6, 7), np.float32))
+    with pytest.raises(ValueError, match=r"grad_output: size 7x5 does not match image \(7x6\)"):
+        _native.aperture_layer(img, disp, focus=0.0, blur=3.0, grad_output=np.zeros((5, 7, 3), np.float32))
+    with pytest.raises(ValueError, match=r"grad_output: non-finite value \(inf\) at pixel x=6, y=0"):
+        _native.aperture_layer(img, disp, focus=0.0, blur=3.0, grad_output=np.pad(
+            np.zeros((5, 6, 3), np.float32), ((0, 1), (0, 1), (0, 0)), constant_values=np.inf))
     with pytest.raises(ValueError, match="image has dtype"):
         _native.aperture_layer(img.astype(np.int32), disp, focus=0.0, blur=3.0)
 
@@ -888,6 +894,86 @@ def test_reproduce_over_seeds_is_one_command(tmp_path):
     for bad in ("1", "1,1", "a,b"):
         with pytest.raises(SystemExit):
             parse_args(["reproduce", "--out", "o", "--seeds", bad])
+
+
+def test_eval_can_score_only_the_layouts_a_smaller_test_set_lacks(tmp_path):
+    """``eval --exclude-scenes-of DIR``: a larger test split (``--test-scenes``) scored
+    without the layouts of DIR's test set. A scene index is one layout in both splits (the
+    same all-in-focus image and disparity), every shared index is left out, each kept scene
+    scores as in the eval of the whole larger split, and the header says what was left out.
+    A DIR without results.json, or of another test seed, is refused in one line. Training
+    starts the costliest runs first. Tiny scenes (32 px, 4 spp), 2 steps."""
+    from drbokeh.dfdnet.data import _load, scene_index
+
+    env = dict(os.environ, DRBOKEH_CLI=str(_find_cli()))
+    small, whole, new = tmp_path / "R", tmp_path / "W", tmp_path / "E"
+    args = ["--size", "32", "--spp", "4", "--train-scenes", "8", "--val-scenes", "8", "--steps", "2", "--batch", "2",
+            "--base", "4", "--jobs", "2", "--background-detail", "0"]
+
+    def dfdnet(*more, ok=True):
+        p = subprocess.run([sys.executable, "-m", "drbokeh.dfdnet", *more, *args], capture_output=True, text=True,
+                           env=env, timeout=600)
+        assert (p.returncode == 0) == ok, p.stderr + p.stdout
+        return p.stdout + p.stderr
+
+    log = dfdnet("reproduce", "--data", str(tmp_path / "D"), "--out", str(small), "--test-scenes", "8",
+                 "--runs", "supervised,aperture-l1g,gausspsf-l1g")
+    assert "training order (the longest first): gausspsf-l1g, aperture-l1g, supervised" in log
+    big = tmp_path / "D2"  # the larger test split; train and validation as traced for R
+    big.mkdir()
+    for name in ("train", "val"):
+        (big / f"{name}.npz").symlink_to(tmp_path / "D" / f"{name}.npz")
+    for d in (whole, new):
+        d.mkdir()
+        for run in ("aperture-l1g", "gausspsf-l1g"):
+            (d / run).symlink_to(small / run)
+    big_args = ["--data", str(big), "--test-scenes", "24", "--runs", "aperture-l1g,gausspsf-l1g"]
+    dfdnet("eval", "--out", str(whole), *big_args)
+    dfdnet("eval", "--out", str(new), *big_args, "--exclude-scenes-of", str(small))
+    w, e = (json.loads((d / "results.json").read_text()) for d in (whole, new))
+    old = {scene_index(n) for n in json.loads((small / "results.json").read_text())["test_scenes"]}
+    shared = [n for n in w["test_scenes"] if scene_index(n) in old]
+    assert shared and len(shared) < len(w["test_scenes"]), "the two test splits share no layout, or all of them"
+    assert e["test_scenes"] == [n for n in w["test_scenes"] if scene_index(n) not in old]
+    assert e["left_out"].startswith(f"{len(shared)} of the split's {len(w['test_scenes'])} scenes left out")
+    assert "left out" in (new / "results.md").read_text() and w["left_out"] == ""
+    keep = [w["test_scenes"].index(n) for n in e["test_scenes"]]
+    runs = 0
+    for rw, re_ in zip(w["rows"], e["rows"]):
+        assert rw["run"] == re_["run"]
+        if rw["run"] in ("aperture-l1g", "gausspsf-l1g"):
+            # float32 network over another batch of scenes: equal to rounding, not to the bit
+            assert re_["mae_per_scene"] == pytest.approx([rw["mae_per_scene"][i] for i in keep], abs=1e-6), rw["run"]
+            runs += 1
+    assert runs == 2
+    # The same index is the same layout: all-in-focus image and disparity (K may differ).
+    s8, s24 = _load(tmp_path / "D" / "test.npz"), _load(big / "test.npz")
+    at = {scene_index(n): i for i, n in enumerate(s24.names)}
+    for i, n in enumerate(s8.names):
+        if scene_index(n) in at:
+            j = at[scene_index(n)]
+            assert np.array_equal(s8.aif[i], s24.aif[j]) and np.array_equal(s8.disparity[i], s24.disparity[j]), n
+    # A DIR that is no eval output, and one whose test split has another seed.
+    assert "no results.json there" in dfdnet("eval", "--out", str(new), *big_args, "--exclude-scenes-of",
+                                              str(tmp_path / "nothing"), ok=False)
+    cfg = json.loads((small / "config.json").read_text())
+    for split in cfg["splits"]:
+        if split["name"] == "test":
+            split["seed"] += 1
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "config.json").write_text(json.dumps(cfg))
+    (other / "results.json").write_text((small / "results.json").read_text())
+    assert "its test split has another seed" in dfdnet("eval", "--out", str(new), *big_args, "--exclude-scenes-of",
+                                                        str(other), ok=False)
+
+
+def test_longest_first_orders_by_step_cost_and_keeps_ties_in_order():
+    from drbokeh.dfdnet.train import longest_first, parse_run
+
+    names = ["supervised", "aperture-hssim", "physical5-hssim", "gausspsf-hssim", "paper5-hssim", "physical5-l1g"]
+    order = [r.name for r in longest_first([parse_run(n) for n in names])]
+    assert order == ["paper5-hssim", "physical5-hssim", "physical5-l1g", "gausspsf-hssim", "aperture-hssim", "supervised"]
 
 
 def test_quick_data_is_far_focus_only(quick_run):

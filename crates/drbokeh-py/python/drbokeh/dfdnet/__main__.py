@@ -26,11 +26,11 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .data import FOCUS, Split, SplitSpec, check_min_blur, default_splits, prepare, with_min_blur
+from .data import FOCUS, Split, SplitSpec, check_min_blur, default_splits, prepare, scene_index, with_min_blur, without_scenes
 from .evaluate import evaluate, metrics
 from .layers import LAYERS
 from .losses import LOSSES
-from .train import HIGHLIGHTS, INPUTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, new_model, parse_run, predict, train_logged, train_run
+from .train import HIGHLIGHTS, INPUTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, longest_first, new_model, parse_run, predict, train_logged, train_run
 
 
 _log = log_line
@@ -237,14 +237,63 @@ def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
+    todo = longest_first(todo)
+    _log("training order (the longest first): " + ", ".join(spec.name for spec in todo))
     with ProcessPoolExecutor(a.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         for f in [pool.submit(train_logged, spec, splits, cfg, a.out) for spec in todo]:
             f.result()
 
 
+def _exclusion(a: argparse.Namespace) -> Optional[Tuple[List[int], Path]]:
+    """The scene indices of ``--exclude-scenes-of DIR``'s test set (its results.json), after
+    checking that DIR's test split, where its config.json records one, has this run's
+    layouts (seed, size, focus, background, perspective): else the same index is another
+    scene. ``None`` without the option."""
+    d = getattr(a, "exclude_scenes_of", None)
+    if d is None:
+        return None
+    what = f"--exclude-scenes-of {d}"
+    try:
+        names = json.loads((d / "results.json").read_text()).get("test_scenes")
+    except FileNotFoundError:
+        raise SystemExit(f"{what}: no results.json there (give an eval output directory)") from None
+    except (OSError, ValueError, AttributeError) as e:
+        raise SystemExit(f"{what}: results.json is not an eval results file ({type(e).__name__}: {e})") from None
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise SystemExit(f"{what}: results.json lists no test scenes")
+    try:
+        indices = [scene_index(n) for n in names]
+    except ValueError as e:
+        raise SystemExit(f"{what}: results.json: {e}") from None
+    mine = next(s for s in _specs(a) if s.name == "test")
+    try:
+        theirs = [s for s in json.loads((d / "config.json").read_text()).get("splits", []) if s.get("name") == "test"]
+    except FileNotFoundError:
+        theirs = []
+    except (OSError, ValueError, AttributeError) as e:
+        raise SystemExit(f"{what}: config.json is not readable ({type(e).__name__}: {e})") from None
+    for key in ("seed", "size", "focus", "background_detail", "perspective"):
+        if theirs and theirs[0].get(key) != getattr(mine, key):
+            raise SystemExit(f"{what}: its test split has another {key} ({theirs[0].get(key)!r} against "
+                             f"{getattr(mine, key)!r}), so its scene indices are other layouts")
+    return indices, d
+
+
 def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
     splits = _splits(a)
-    res = evaluate(a.out, splits, runs, cfg, note=a.note or "")
+    left_out = ""
+    exclusion = _exclusion(a)
+    if exclusion is not None:
+        indices, d = exclusion
+        test = splits["test"]
+        try:
+            splits["test"] = without_scenes(test, indices)
+        except ValueError as e:
+            raise SystemExit(f"--exclude-scenes-of {d}: {e}") from None
+        left_out = (f"{len(test) - len(splits['test'])} of the split's {len(test)} scenes left out: "
+                    f"the layouts of {d}'s test set (--exclude-scenes-of)")
+        _log(f"eval: {left_out}")
+    res = evaluate(a.out, splits, runs, cfg, note=a.note or "", left_out=left_out)
     _log(f"wrote {a.out / 'results.md'}, {a.out / 'index.html'}")
     print((a.out / "results.md").read_text())
     del res
@@ -317,6 +366,8 @@ def _quick(a: argparse.Namespace) -> None:
 
 RETRAIN_HELP = "train runs again even if DIR has them"
 NOTE_HELP = "a line put above the table (e.g. what is reduced)"
+EXCLUDE_HELP = ("score only the test scenes whose layouts are not in DIR's test set (DIR: an eval output of the same "
+                "test seed, e.g. a smaller --test-scenes that choices were made on); scenes match by index")
 
 EXAMPLES = {
     "main": """examples:
@@ -334,6 +385,7 @@ and DIR/RUN/log.json; the data is traced into --data (default DIR/data) once and
     "eval": """examples:
   python -m drbokeh.dfdnet eval --data D --out R
   python -m drbokeh.dfdnet eval --data D --out R --note "seed 18"
+  python -m drbokeh.dfdnet eval --data D2 --test-scenes 512 --out E --exclude-scenes-of R   # new layouts only
 
 Evaluates the runs trained in DIR on the test split: DIR/results.md and results.json,
 DIR/index.html with the test images, DIR/plots/*.svg (loss curves, validation MAE).""",
@@ -374,12 +426,14 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                        epilog=EXAMPLES["eval"], formatter_class=raw)
     _common(e)
     e.add_argument("--note", help=NOTE_HELP)
+    e.add_argument("--exclude-scenes-of", type=Path, metavar="DIR", help=EXCLUDE_HELP)
     r = sub.add_parser("reproduce", help="train the whole table, then eval",
                        description="Train the whole table, then evaluate it.", epilog=EXAMPLES["reproduce"],
                        formatter_class=raw)
     _common(r)
     r.add_argument("--retrain", action="store_true", help=RETRAIN_HELP)
     r.add_argument("--note", help=NOTE_HELP)
+    r.add_argument("--exclude-scenes-of", type=Path, metavar="DIR", help=EXCLUDE_HELP)
     r.add_argument("--seeds", type=_seeds_arg, metavar="S,S,...",
                    help="the whole table at each seed (instead of --seed) into OUT/seed<S>, sharing the data, "
                         "then one table over them in OUT (as the table command)")

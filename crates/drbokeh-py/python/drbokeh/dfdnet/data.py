@@ -260,6 +260,28 @@ def subset(split: Split, keep: np.ndarray) -> Split:
     )
 
 
+def scene_index(name: str) -> int:
+    """The index in a scene's directory name (``scene_0020`` -> 20). A split's scene layout
+    (billboards, textures, disparity) follows its seed and this index; the name's zero
+    padding and the scene's blur K follow the number of scenes traced, so the same index
+    in a larger split of the same seed is the same layout with another K."""
+    stem, _, digits = name.rpartition("_")
+    if not stem or not digits.isdigit():
+        raise ValueError(f"{name!r}: not a scene name (scene_<index>)")
+    return int(digits)
+
+
+def without_scenes(split: Split, indices: Sequence[int]) -> Split:
+    """The split without the scenes whose index (:func:`scene_index`) is in ``indices``
+    (e.g. a larger test split without the layouts of a smaller one that choices were made
+    on). Leaving no scene is a ``ValueError``."""
+    drop = set(indices)
+    kept = subset(split, np.array([scene_index(n) not in drop for n in split.names], dtype=bool))
+    if len(kept) == 0:
+        raise ValueError(f"leaving out {len(drop)} scene indices leaves none of the split's {len(split)} scenes")
+    return kept
+
+
 def check_min_blur(min_blur_px: float) -> float:
     """``min_blur_px`` if it is a blur radius in pixels (finite, >= 0); else a ``ValueError``."""
     if not (np.isfinite(min_blur_px) and min_blur_px >= 0.0):

@@ -115,9 +115,11 @@ def evaluate(
     cfg: TrainConfig,
     html_scenes: int = 8,
     note: str = "",
+    left_out: str = "",
 ) -> Dict[str, object]:
     """Writes ``results.md``, ``results.json``, ``index.html`` (+ ``html/*.png``) and
-    ``plots/*.svg`` into ``out_dir``; returns the results."""
+    ``plots/*.svg`` into ``out_dir``; returns the results. ``left_out`` says which scenes of
+    the split the test set lacks (empty: none), in the table's header and the JSON."""
     test = splits["test"]
     rows: List[Dict[str, object]] = []
     preds: Dict[str, np.ndarray] = {}
@@ -157,7 +159,8 @@ def evaluate(
         f"{', '.join(f'{f:g}' for f in sorted(set(test.focus.tolist())))}), "
         f"{int((test.blur >= 3).sum())} with largest blur >= 3 px; "
         f"{100 * textured_mask(test.aif).mean():.0f} % of the pixels textured (MAE tex), "
-        f"{100 * (test.disparity < BACKGROUND_DISPARITY).mean():.0f} % background (MAE bg).",
+        f"{100 * (test.disparity < BACKGROUND_DISPARITY).mean():.0f} % background (MAE bg)."
+        + (f" {left_out[0].upper()}{left_out[1:]}." if left_out else ""),
         "",
         "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | MAE tex | MAE bg | MAE fg | s/step | s/epoch |",
         "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
@@ -169,7 +172,7 @@ def evaluate(
             f"{_fmt(r.get('seconds_per_epoch', float('nan')), 1)} |"
         )
     (out_dir / "results.md").write_text("\n".join(lines) + "\n")
-    results = {"rows": rows, "config": cfg.__dict__, "test_scenes": test.names, "note": note}
+    results = {"rows": rows, "config": cfg.__dict__, "test_scenes": test.names, "note": note, "left_out": left_out}
     (out_dir / "results.json").write_text(json.dumps(results, indent=1))
     _plots(out_dir, [s for s in runs if s.name in preds])
     _html(out_dir, test, preds, rows, html_scenes)

@@ -67,6 +67,26 @@ TABLE_RUNS: List[RunSpec] = [
 ]
 
 
+# Seconds per training step relative to ``physical5`` (one thread, two trainings at once on
+# 2 cores). Measured in session 29 (docs/dfdnet.md; seed 23: paper5 1.61 s, physical5 1.51,
+# GaussPSF 1.30, aperture 0.84, supervised 0.24; GaussPSF's follows the largest predicted
+# blur and ran 0.3-0.9x physical5's over seeds 17-23); the one-layer and three-layer stacks
+# are placed between by their work, not measured lately. Only the order in which runs
+# start depends on it (:func:`longest_first`), never what a run computes.
+RELATIVE_STEP_COST = {
+    "paper5": 1.05, "physical5": 1.0, "aperturepy": 1.0, "physical3": 0.9, "paper3": 0.9, "physical3m": 0.9,
+    "paper3m": 0.9, "physical": 0.8, "paper": 0.8, "gausspsf": 0.7, "aperture": 0.6, "supervised": 0.16,
+}
+
+
+def longest_first(runs: List[RunSpec]) -> List[RunSpec]:
+    """``runs`` ordered by :data:`RELATIVE_STEP_COST`, the costliest first (ties keep their
+    order): with two processes pulling from one queue, a short run last fills the other
+    core's tail, where a long run last trains alone (session 29: GaussPSF last, one core
+    idle for about 18 minutes)."""
+    return sorted(runs, key=lambda r: -RELATIVE_STEP_COST.get(r.layer, 1.0))
+
+
 def parse_run(name: str) -> RunSpec:
     if name == "supervised":
         return RunSpec("supervised")
