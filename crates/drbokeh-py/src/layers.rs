@@ -10,7 +10,6 @@ use crate::policy::check_same_size;
 use crate::pool::Workers;
 use drbokeh::baselines::aperture_compositing;
 use drbokeh::presets::RenderSettings;
-use drbokeh::Image;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
