@@ -966,6 +966,12 @@ def test_eval_can_score_only_the_layouts_a_smaller_test_set_lacks(tmp_path):
     (other / "results.json").write_text((small / "results.json").read_text())
     assert "its test split has another seed" in dfdnet("eval", "--out", str(new), *big_args, "--exclude-scenes-of",
                                                         str(other), ok=False)
+    # reproduce checks it before tracing or training anything
+    late = tmp_path / "late"
+    assert "no results.json there" in dfdnet("reproduce", "--data", str(tmp_path / "D3"), "--out", str(late),
+                                              "--test-scenes", "8", "--runs", "supervised",
+                                              "--exclude-scenes-of", str(tmp_path / "nothing"), ok=False)
+    assert not late.exists() and not (tmp_path / "D3").exists()
 
 
 def test_longest_first_orders_by_step_cost_and_keeps_ties_in_order():

@@ -280,9 +280,9 @@ def _exclusion(a: argparse.Namespace) -> Optional[Tuple[List[int], Path]]:
 
 
 def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
+    exclusion = _exclusion(a)
     splits = _splits(a)
     left_out = ""
-    exclusion = _exclusion(a)
     if exclusion is not None:
         indices, d = exclusion
         test = splits["test"]
@@ -461,6 +461,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         _quick(a)
         return 0
     start = time.monotonic()
+    if a.cmd in ("eval", "reproduce"):
+        _exclusion(a)  # a bad --exclude-scenes-of fails now, not after tracing and training
     if a.cmd == "reproduce" and a.seeds:
         _reproduce_seeds(a)
     else:
