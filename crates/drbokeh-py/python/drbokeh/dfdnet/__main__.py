@@ -244,12 +244,16 @@ def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None
             f.result()
 
 
-def _exclusion(a: argparse.Namespace) -> Optional[Tuple[List[int], Path]]:
+# ``--exclude-scenes-of``: the scene indices to leave out of the test split, and the directory.
+Exclusion = Optional[Tuple[List[int], Path]]
+
+
+def _exclusion(a: argparse.Namespace) -> Exclusion:
     """The scene indices of ``--exclude-scenes-of DIR``'s test set (its results.json), after
     checking that DIR's test split, where its config.json records one, has this run's
     layouts (seed, size, focus, background, perspective): else the same index is another
     scene. ``None`` without the option."""
-    d = getattr(a, "exclude_scenes_of", None)
+    d = a.exclude_scenes_of
     if d is None:
         return None
     what = f"--exclude-scenes-of {d}"
@@ -279,8 +283,8 @@ def _exclusion(a: argparse.Namespace) -> Optional[Tuple[List[int], Path]]:
     return indices, d
 
 
-def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
-    exclusion = _exclusion(a)
+def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig, exclusion: Exclusion) -> None:
+    """The eval, on the test split without ``exclusion``'s scenes (:func:`_exclusion`)."""
     splits = _splits(a)
     left_out = ""
     if exclusion is not None:
@@ -310,7 +314,7 @@ def _write_table(dirs: List[Path], out: Path) -> None:
     print((out / "results.md").read_text())
 
 
-def _reproduce_seeds(a: argparse.Namespace) -> None:
+def _reproduce_seeds(a: argparse.Namespace, exclusion: Exclusion) -> None:
     """``reproduce --seeds``: the table at each seed into OUT/seed<S> (one data cache), then
     the table over the seeds in OUT."""
     dirs = []
@@ -319,7 +323,7 @@ def _reproduce_seeds(a: argparse.Namespace) -> None:
         runs, cfg = _runs(b), _cfg(b)
         _log(f"seed {seed}: {b.out}")
         _train(b, runs, cfg)
-        _eval(b, runs, cfg)
+        _eval(b, runs, cfg, exclusion)
         dirs.append(b.out)
     _write_table(dirs, a.out)
 
@@ -461,16 +465,16 @@ def main(argv: Optional[List[str]] = None) -> int:
         _quick(a)
         return 0
     start = time.monotonic()
-    if a.cmd in ("eval", "reproduce"):
-        _exclusion(a)  # a bad --exclude-scenes-of fails now, not after tracing and training
+    # read (and a bad one refused) before tracing and training
+    exclusion = _exclusion(a) if a.cmd in ("eval", "reproduce") else None
     if a.cmd == "reproduce" and a.seeds:
-        _reproduce_seeds(a)
+        _reproduce_seeds(a, exclusion)
     else:
         runs, cfg = _runs(a), _cfg(a)
         if a.cmd in ("train", "reproduce"):
             _train(a, runs, cfg)
         if a.cmd in ("eval", "reproduce"):
-            _eval(a, runs, cfg)
+            _eval(a, runs, cfg, exclusion)
     if a.cmd == "reproduce":
         _log(f"reproduce: {(time.monotonic() - start) / 60:.1f} min wall in all (data, training, eval)")
     return 0

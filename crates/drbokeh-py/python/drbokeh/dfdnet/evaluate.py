@@ -160,7 +160,7 @@ def evaluate(
         f"{int((test.blur >= 3).sum())} with largest blur >= 3 px; "
         f"{100 * textured_mask(test.aif).mean():.0f} % of the pixels textured (MAE tex), "
         f"{100 * (test.disparity < BACKGROUND_DISPARITY).mean():.0f} % background (MAE bg)."
-        + (f" {left_out[0].upper()}{left_out[1:]}." if left_out else ""),
+        + (f" {left_out}." if left_out else ""),
         "",
         "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | MAE tex | MAE bg | MAE fg | s/step | s/epoch |",
         "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
