@@ -185,6 +185,34 @@ def test_unset_options_take_the_table_protocol_or_quick_settings():
             parse_args(["train", "--out", "o", "--init-disparity", bad])
 
 
+def test_a_named_protocol_is_the_long_command_line_and_given_options_win():
+    """``--protocol session29`` gives exactly the settings of the long command line that
+    docs/dfdnet.md ran for its current table (session 30's run24.sh); an option given
+    beside it wins; session12 is the options' own defaults; --quick and an unknown name
+    are refused."""
+    from drbokeh.dfdnet.__main__ import _cfg, _runs, parse_args
+
+    long = ["reproduce", "--data", "D4s", "--perspective", "--train-scenes", "960", "--val-scenes", "64",
+            "--test-scenes", "128", "--min-blur", "3", "--batch", "4", "--inputs", "aif", "--init-disparity", "0.15",
+            "--focus-prior", "4", "--focus-prior-radius", "1", "--seed", "24", "--jobs", "2", "--out", "R24",
+            "--runs", "physical5-hssim,physical5-ssim,physical5-l1g,paper5-hssim,aperture-hssim,gausspsf-hssim,"
+            "supervised"]
+    short = parse_args(["reproduce", "--protocol", "session29", "--data", "D4s", "--seed", "24", "--out", "R24"])
+    full = parse_args(long)
+    assert {**vars(short), "protocol": None} == {**vars(full), "protocol": None}
+    assert _cfg(short) == _cfg(full) and _runs(short) == _runs(full)
+    assert (short.protocol, full.protocol) == ("session29", "session12")
+    # what is given wins, in any order
+    wider = parse_args(["eval", "--test-scenes", "512", "--protocol", "session29", "--out", "X", "--min-blur", "2"])
+    assert (wider.test_scenes, wider.min_blur, wider.train_scenes, wider.perspective) == (512, 2.0, 960, True)
+    assert vars(parse_args(["train", "--protocol", "session12", "--out", "o"])) == {
+        **vars(parse_args(["train", "--out", "o"])), "protocol": "session12"}
+    for bad in (["train", "--quick", "--protocol", "session29", "--out", "o"],
+                ["reproduce", "--protocol", "session30", "--out", "o"]):
+        with pytest.raises(SystemExit):
+            parse_args(bad)
+
+
 def test_min_blur_keeps_the_scenes_with_enough_blur_in_every_split():
     """--min-blur leaves out, in every split, the scenes whose largest blur K is below it
     (their arrays and names together); 0 keeps all; a split left empty, a negative or a

@@ -41,6 +41,24 @@ QUICK_SIZE = 64
 BACKGROUND_DETAIL = 1.0
 # --quick's own settings (tiny data, a few steps; the Python test suite's check).
 QUICK = {"steps": 40, "batch": 4, "crop": 64, "background_detail": 0.0, "init_disparity": "pytorch"}
+# ``--protocol NAME``: a table's settings under one name, so that reproducing it is one short
+# command; options given on the command line win over them. ``session12``: the options'
+# own defaults (session 12's table); ``session29``: the table of sessions 27-30
+# (docs/dfdnet.md): scenes with a depth cue, four times the training scenes, only scenes
+# with K >= 3 px, batches of 4, a start of 0.15, the focus prior inside the depth of
+# field, and the runs with the five-layer stacks, the loss ablation and the supervised bound.
+PROTOCOLS: Dict[str, Dict[str, object]] = {
+    "session12": {},
+    "session29": {
+        "perspective": True, "train_scenes": 960, "val_scenes": 64, "test_scenes": 128, "min_blur": 3.0,
+        "batch": 4, "inputs": "aif", "init_disparity": 0.15, "focus_prior": 4.0, "focus_prior_radius": 1.0,
+        "runs": "physical5-hssim,physical5-ssim,physical5-l1g,paper5-hssim,aperture-hssim,gausspsf-hssim,supervised",
+    },
+}
+PROTOCOL_HELP = ("a table's settings by name, as defaults that the options given here override: session12 (the "
+                 "options' own defaults: session 12's table), session29 (docs/dfdnet.md's current table, sessions "
+                 "27-30: " + " ".join(f"--{k.replace('_', '-')}" + ("" if v is True else f" {v}")
+                                       for k, v in PROTOCOLS["session29"].items()) + ")")
 
 
 def _init_arg(text: str) -> object:
@@ -115,6 +133,7 @@ def _resolve(a: argparse.Namespace, quick: bool) -> None:
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", "--out", dest="out", required=True, type=Path, help="output directory")
+    p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="session12", help=PROTOCOL_HELP)
     p.add_argument("--data", type=Path, help="data cache directory (default OUT/data); scenes are made there if missing")
     p.add_argument("--drbokeh", help="the drbokeh command line (default $DRBOKEH_CLI, PATH, or this checkout's target/release)")
     p.add_argument("--size", type=int, default=SIZE, help=f"scene size, px (default {SIZE}; {QUICK_SIZE} with --quick)")
@@ -376,7 +395,8 @@ EXCLUDE_HELP = ("score only the test scenes whose layouts are not in DIR's test 
 EXAMPLES = {
     "main": """examples:
   python -m drbokeh.dfdnet train --quick --out q        # a few minutes: tiny data, 40 steps
-  python -m drbokeh.dfdnet reproduce --data D --out R   # the whole table (about 45 min on 2 cores)
+  python -m drbokeh.dfdnet reproduce --data D --out R   # session 12's table (about 45 min on 2 cores)
+  python -m drbokeh.dfdnet reproduce --protocol session29 --data D --out R --seed 24   # the current table (1.5-2 h)
   python -m drbokeh.dfdnet train --data D --out R --runs physical-hssim,gausspsf-hssim --seed 18
   python -m drbokeh.dfdnet table R17 R18 R19 -o T       # one table over three seeds' eval outputs""",
     "train": """examples:
@@ -408,6 +428,7 @@ of RMSE, delta < 1.25, MAE bg/fg and s/epoch.""",
   python -m drbokeh.dfdnet reproduce --data D --out R
   python -m drbokeh.dfdnet reproduce --data D --out R --seed 19
   python -m drbokeh.dfdnet reproduce --data D --out R --seeds 17,18,19   # R/seed17..19, R/results.md
+  python -m drbokeh.dfdnet reproduce --protocol session29 --data D --out R --seed 24   # docs/dfdnet.md's table
 
 Traces the data if --data lacks it, trains every run of the table (--jobs at once), then
 evaluates: the one command behind docs/dfdnet.md's table.""",
@@ -450,6 +471,13 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     if a.cmd == "table":
         return a
     quick = a.cmd == "train" and a.quick
+    if a.protocol != "session12":
+        if quick:
+            ap.error("--protocol and --quick: --quick has its own settings")
+        # Again with the protocol's settings as defaults, so that what is given here wins.
+        for sp in (t, e, r):
+            sp.set_defaults(**PROTOCOLS[a.protocol])
+        a = ap.parse_args(argv)
     if quick and a.size == SIZE:
         a.size = QUICK_SIZE
     _resolve(a, quick)
@@ -465,6 +493,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         _quick(a)
         return 0
     start = time.monotonic()
+    if a.protocol != "session12":
+        _log(f"protocol {a.protocol} (options given on the command line override it)")
     # read (and a bad one refused) before tracing and training
     exclusion = _exclusion(a) if a.cmd in ("eval", "reproduce") else None
     if a.cmd == "reproduce" and a.seeds:
