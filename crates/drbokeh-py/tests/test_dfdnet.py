@@ -708,6 +708,7 @@ def test_eval_loads_each_run_as_trained_and_starts_the_untrained_row_from_the_ru
     still loads the run at its logged width and reports the untrained network the run
     started from: the quick run's own numbers come back."""
     import shutil
+    from dataclasses import replace
 
     from drbokeh.dfdnet.data import _load
     from drbokeh.dfdnet.evaluate import evaluate
@@ -717,10 +718,48 @@ def test_eval_loads_each_run_as_trained_and_starts_the_untrained_row_from_the_ru
     shutil.copytree(out / "physical-hssim", tmp_path / "physical-hssim")
     splits = {"test": _load(out / "data" / "test.npz")}
     other = TrainConfig(seed=99, base=12, init_disparity=0.3)
-    res = evaluate(tmp_path, splits, [RunSpec("physical", "hssim")], other, html_scenes=1)
+    res = evaluate(tmp_path, splits, [RunSpec("physical", "hssim")], replace(other, w_focus=7.0), html_scenes=1)
     rows = {row["run"]: row for row in res["rows"]}
     assert rows["physical-hssim"]["mae"] == pytest.approx(r["test_mae_trained"], abs=1e-5)
     assert rows["untrained network"]["mae"] == pytest.approx(r["test_mae_untrained"], abs=1e-5)
+    # The loss columns use the run's own loss (its log: no focus prior), not the eval's
+    # command line (a prior of weight 7 here).
+    from drbokeh.dfdnet.train import load_model, predict, scene_losses
+
+    spec, trained = RunSpec("physical", "hssim"), TrainConfig(base=8)
+    test = splits["test"]
+    pred = predict(load_model(tmp_path / "physical-hssim", trained), test.aif)
+    at_pred, at_truth = scene_losses(spec, trained, test, pred), scene_losses(spec, trained, test, test.disparity)
+    row = rows["physical-hssim"]
+    assert row["loss_at_prediction"] == pytest.approx(at_pred.mean(), rel=1e-6)
+    assert row["loss_at_truth"] == pytest.approx(at_truth.mean(), rel=1e-6)
+    assert row["truth_lower_scenes"] == int((at_truth < at_pred).sum())
+    md = (tmp_path / "results.md").read_text()
+    assert f"{row['truth_lower_scenes']} of {len(test)} |" in md and "| loss pred / truth | truth lower |" in md
+    assert "loss_at_truth" not in rows["untrained network"]
+
+
+def test_scene_losses_rank_the_disparity_a_self_rendered_image_was_made_with_lowest():
+    """``scene_losses``: on images rendered by the layer itself from a known disparity, the
+    run's loss is lower at that disparity than at a flat one or a shifted one, scene by
+    scene; and it is the loss ``image_loss`` gives each scene alone."""
+    import torch
+
+    from drbokeh.dfdnet.layers import make_layer
+    from drbokeh.dfdnet.train import RunSpec, TrainConfig, image_loss, scene_losses
+
+    split = _tiny_split(5, size=64)
+    layer = make_layer("gausspsf")
+    with torch.no_grad():
+        split.bokeh = layer(torch.from_numpy(split.aif), torch.from_numpy(split.disparity),
+                            torch.from_numpy(split.focus), torch.from_numpy(split.blur)).numpy()
+    spec, cfg = RunSpec("gausspsf", "hssim"), TrainConfig(highlights="none")
+    at_truth = scene_losses(spec, cfg, split, split.disparity)
+    for wrong in (np.full_like(split.disparity, 0.3), np.clip(split.disparity + 0.2, 0, 1)):
+        assert (at_truth < scene_losses(spec, cfg, split, wrong)).all()
+    b = {k: getattr(split, k)[2:3] for k in ("aif", "bokeh", "focus", "blur")}
+    alone = image_loss(layer, "hssim", cfg, b, torch.from_numpy(split.disparity[2:3]))[0]
+    assert at_truth[2] == pytest.approx(float(alone), rel=1e-6)
 
 
 def _tiny_split(seed: int, n: int = 4, size: int = 32):
@@ -808,6 +847,11 @@ def test_table_over_seeds_combines_the_eval_outputs_and_refuses_mixed_protocols(
         assert row["mae_mean"] == pytest.approx(np.mean(row["mae"]))
         assert row["mae_min"] <= row["mae_mean"] <= row["mae_max"]
     assert rows["supervised"]["wins"] is None
+    for name in ("gausspsf-l1g", "aperture-l1g"):
+        assert rows[name]["truth_lower"] == sum(e[name]["truth_lower_scenes"] for e in evals)
+        assert rows[name]["loss_at_truth"] == pytest.approx(np.mean([e[name]["loss_at_truth"] for e in evals]))
+        assert f"| {rows[name]['truth_lower']} of 4 |" in (tmp_path / "T" / "results.md").read_text()
+    assert rows["supervised"]["truth_lower"] is None and "loss_at_truth" not in evals[0]["supervised"]
     layer_runs = ("gausspsf-l1g", "aperture-l1g")
     assert sum(rows[n]["wins"] for n in layer_runs) == 2
     for i, e in enumerate(evals):

@@ -11,7 +11,13 @@ textured (:func:`textured_mask`); elsewhere (flat areas) any disparity renders a
 self-supervised network has nothing to learn from. ``MAE bg`` / ``MAE fg``: the MAE over
 the pixels whose true disparity is below / at least ``BACKGROUND_DISPARITY`` (with far
 focus the in-focus background, about 70 % of the pixels, and the foregrounds); the
-all-pixel MAE is mostly the background's level. Reference rows: the untrained network
+all-pixel MAE is mostly the background's level. ``loss pred / truth``: for a run trained
+through a rendering layer, its training loss (layer, loss terms, focus prior) on the whole
+test images at the network's prediction and at the true disparity, averaged over the
+scenes, and ``truth lower``: in how many scenes the loss ranks the truth below the
+prediction. A layer whose loss ranks the truth lower in most scenes has a network that
+did not reach what its loss asks for; one that ranks the prediction lower has a loss whose
+minimum lies away from the truth (docs/dfdnet.md, "Session 31"). Reference rows: the untrained network
 (the same initial weights every run starts from) and the oracle constant (the median of
 each scene's *true* disparity).
 """
@@ -28,7 +34,7 @@ import numpy as np
 
 from .data import Split
 from .report import smooth, svg_lines, upscale, write_png
-from .train import RunSpec, TrainConfig, load_model, new_model, predict
+from .train import RunSpec, TrainConfig, load_model, new_model, predict, scene_losses
 
 
 def depth_mm(disparity: np.ndarray, near_mm: np.ndarray, far_mm: np.ndarray) -> np.ndarray:
@@ -108,6 +114,17 @@ def started_from(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig
                    inputs=str(log_config.get("inputs", "aif")))
 
 
+# The ``TrainConfig`` fields that make up a run's training loss (``image_loss``).
+LOSS_FIELDS = ("w_l1", "w_smooth", "w_structure", "edge_sensitivity", "highlights", "w_focus", "focus_prior_radius_px")
+
+
+def trained_loss(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` with the loss settings a run's log records (its weights, highlight mode and
+    focus prior at the end of training), so that the loss is the one it was trained with
+    whatever the eval's command line says."""
+    return replace(cfg, **{k: log_config[k] for k in LOSS_FIELDS if k in log_config})  # type: ignore[arg-type]
+
+
 def evaluate(
     out_dir: Path,
     splits: Dict[str, Split],
@@ -133,8 +150,15 @@ def evaluate(
         starts[(start.seed, start.base, start.init_disparity, start.inputs)] = start
         p = predict(load_model(run_dir, spec.config(start)), start.input_of(test.aif, test.bokeh))
         preds[spec.name] = p
+        ranked: Dict[str, object] = {}
+        if spec.layer != "supervised":
+            trained = trained_loss(log["config"], start)
+            at_pred = scene_losses(spec, trained, test, p)
+            at_truth = scene_losses(spec, trained, test, test.disparity)
+            ranked = {"loss_at_prediction": float(at_pred.mean()), "loss_at_truth": float(at_truth.mean()),
+                      "truth_lower_scenes": int((at_truth < at_pred).sum())}
         rows.append({
-            "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test),
+            "run": spec.name, "layer": spec.layer, "loss": log["loss"], **metrics(p, test), **ranked,
             "seconds_per_step": log["seconds_per_step"], "seconds_per_epoch": log["seconds_per_epoch"],
             "epochs": log["epochs"], "steps": log["config"]["steps"],
             # How the run was trained (its log), so that tables over seeds can check that
@@ -162,14 +186,16 @@ def evaluate(
         f"{100 * (test.disparity < BACKGROUND_DISPARITY).mean():.0f} % background (MAE bg)."
         + (f" {left_out}." if left_out else ""),
         "",
-        "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | MAE tex | MAE bg | MAE fg | s/step | s/epoch |",
-        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| run | layer | loss | MAE | RMSE | delta<1.25 | MAE K>=3 | MAE tex | MAE bg | MAE fg | loss pred / truth | truth lower | s/step | s/epoch |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
+        ranked = (f"{_fmt(r['loss_at_prediction'], 3)} / {_fmt(r['loss_at_truth'], 3)} | "  # type: ignore[arg-type]
+                  f"{r['truth_lower_scenes']} of {len(test)}") if "loss_at_truth" in r else "- | -"
         lines.append(
             f"| {r['run']} | {r['layer']} | {r['loss']} | {_fmt(r['mae'])} | {_fmt(r['rmse'])} | "
-            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r['mae_tex'])} | {_fmt(r['mae_bg'])} | {_fmt(r['mae_fg'])} | {_fmt(r.get('seconds_per_step', float('nan')), 2)} | "
-            f"{_fmt(r.get('seconds_per_epoch', float('nan')), 1)} |"
+            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r['mae_tex'])} | {_fmt(r['mae_bg'])} | {_fmt(r['mae_fg'])} | {ranked} | "
+            f"{_fmt(r.get('seconds_per_step', float('nan')), 2)} | {_fmt(r.get('seconds_per_epoch', float('nan')), 1)} |"
         )
     (out_dir / "results.md").write_text("\n".join(lines) + "\n")
     results = {"rows": rows, "config": cfg.__dict__, "test_scenes": test.names, "note": note, "left_out": left_out}

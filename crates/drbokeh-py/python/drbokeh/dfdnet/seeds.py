@@ -27,7 +27,9 @@ from .train import TrainConfig
 REFERENCE_LAYERS = ("supervised", "-")
 # Metrics averaged over the seeds (results.json row keys) and their column names.
 MEAN_COLUMNS = (("rmse", "RMSE"), ("delta125", "delta<1.25"), ("mae_bg", "MAE bg"), ("mae_fg", "MAE fg"),
-                ("seconds_per_epoch", "s/epoch"))
+                ("loss_at_prediction", "loss pred"), ("loss_at_truth", "loss truth"), ("seconds_per_epoch", "s/epoch"))
+# Columns of MEAN_COLUMNS shown with 3 / 1 decimals (the others with 4).
+THREE_DIGITS = ("delta125", "loss_at_prediction", "loss_at_truth")
 
 
 class SeedTableError(ValueError):
@@ -140,6 +142,10 @@ def combine(results: Sequence[Dict[str, object]]) -> Dict[str, object]:
         for key, _ in MEAN_COLUMNS:
             vals = [s[n].get(key) for s in by_seed]
             row[key] = float(np.mean(vals)) if all(isinstance(v, (int, float)) for v in vals) else None
+        # In how many (scene, seed) pairs the run's loss ranks the truth below its prediction
+        # (evals since session 31 record it).
+        lower = [s[n].get("truth_lower_scenes") for s in by_seed]
+        row["truth_lower"] = int(sum(lower)) if all(isinstance(v, int) for v in lower) else None  # type: ignore[arg-type]
         rows.append(row)
     partial = sorted({row["run"] for r in results for row in r["rows"]} - set(names))  # type: ignore[union-attr]
     layered = [r for r in rows if r["wins"] is not None]
@@ -181,12 +187,14 @@ def markdown(table: Dict[str, object]) -> str:
     rows: List[Dict[str, object]] = table["rows"]  # type: ignore[assignment]
     best = table["best"]
     head = ["run", "layer", "loss"] + [f"MAE seed {s}" for s in seeds] + ["MAE mean", "min-max", "lowest (of layers)"]
-    head += [name + " (mean)" for _, name in MEAN_COLUMNS]
+    head += [name + " (mean)" for _, name in MEAN_COLUMNS] + ["truth lower (all seeds)"]
     lines = ["# drbokeh.dfdnet: test table over seeds", "",
              f"Seeds {', '.join(map(str, seeds))} ({', '.join(table['dirs'])}); {table['test_scenes']} test scenes; "  # type: ignore[arg-type]
              "every setting but the seed is the same in each directory. \"lowest\": at how many seeds the run had the "
              "lowest MAE among the runs trained through a rendering layer (the supervised and reference rows are not "
-             "counted). The mean with the lowest value among the layer runs is in bold.", "",
+             "counted). The mean with the lowest value among the layer runs is in bold. \"loss pred\" / \"loss truth\": "
+             "the run's training loss at its prediction and at the true disparity (means over the scenes and seeds); "
+             "\"truth lower\": in how many (scene, seed) pairs that loss ranks the truth below the prediction.", "",
              "| " + " | ".join(head) + " |",
              "| --- | --- | --- | " + " | ".join("---:" for _ in head[3:]) + " |"]
     left_out: List[str] = table.get("left_out", [])  # type: ignore[assignment]
@@ -197,7 +205,9 @@ def markdown(table: Dict[str, object]) -> str:
         cells = [str(r["run"]), str(r["layer"]), str(r["loss"])] + [_f(v) for v in r["mae"]]  # type: ignore[union-attr]
         cells += [f"**{mean}**" if r["run"] == best else mean, f"{_f(r['mae_min'])}-{_f(r['mae_max'])}",
                   "-" if r["wins"] is None else f"{r['wins']} of {len(seeds)}"]
-        cells += [_f(r[key], 3 if key == "delta125" else (1 if key == "seconds_per_epoch" else 4)) for key, _ in MEAN_COLUMNS]
+        cells += [_f(r[key], 3 if key in THREE_DIGITS else (1 if key == "seconds_per_epoch" else 4)) for key, _ in MEAN_COLUMNS]
+        cells.append("-" if r.get("truth_lower") is None
+                     else f"{r['truth_lower']} of {table['test_scenes'] * len(seeds)}")  # type: ignore[operator]
         lines.append("| " + " | ".join(cells) + " |")
     pairs: List[Dict[str, object]] = table.get("paired", [])  # type: ignore[assignment]
     if pairs:

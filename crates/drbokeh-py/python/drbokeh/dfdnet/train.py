@@ -334,18 +334,30 @@ def train_run(
 
 
 @torch.no_grad()
-def split_loss(model: UNet, split: Split, spec: RunSpec, cfg: TrainConfig) -> float:
-    """The run's image loss on a split's whole images, scene by scene, averaged."""
+def scene_losses(spec: RunSpec, cfg: TrainConfig, split: Split, disparity: np.ndarray) -> np.ndarray:
+    """The run's training loss (:func:`image_loss`: its layer, loss terms and focus prior)
+    of each scene of ``split`` with the disparity ``disparity`` ``(N, 1, H, W)``, on the
+    whole images: e.g. at a network's prediction and at the true disparity, to see which of
+    the two the loss ranks lower."""
     cfg = spec.config(cfg)
     layer = make_layer(spec.layer, cfg.threads)
     extra = highlight_arrays(split, cfg.highlights)
-    total = 0.0
+    out = np.zeros(len(split))
     for i in range(len(split)):
         b = {"aif": split.aif[i : i + 1], "bokeh": split.bokeh[i : i + 1], "focus": split.focus[i : i + 1],
              "blur": split.blur[i : i + 1], **{k: v[i : i + 1] for k, v in extra.items()}}
-        pred = predict(model, cfg.input_of(b["aif"], b["bokeh"]))
-        total += float(image_loss(layer, spec.loss, cfg, b, torch.from_numpy(pred))[0])
-    return total / max(len(split), 1)
+        d = torch.from_numpy(np.ascontiguousarray(disparity[i : i + 1], dtype=np.float32))
+        out[i] = float(image_loss(layer, spec.loss, cfg, b, d)[0])
+    return out
+
+
+@torch.no_grad()
+def split_loss(model: UNet, split: Split, spec: RunSpec, cfg: TrainConfig) -> float:
+    """The run's image loss on a split's whole images, scene by scene, averaged."""
+    c = spec.config(cfg)
+    pred = np.concatenate([predict(model, c.input_of(split.aif[i : i + 1], split.bokeh[i : i + 1]))
+                           for i in range(len(split))]) if len(split) else split.disparity
+    return float(scene_losses(spec, cfg, split, pred).mean()) if len(split) else 0.0
 
 
 def log_line(msg: str) -> None:
