@@ -354,10 +354,13 @@ def scene_losses(spec: RunSpec, cfg: TrainConfig, split: Split, disparity: np.nd
 @torch.no_grad()
 def split_loss(model: UNet, split: Split, spec: RunSpec, cfg: TrainConfig) -> float:
     """The run's image loss on a split's whole images, scene by scene, averaged."""
+    if len(split) == 0:
+        return 0.0
+    # One scene at a time, as before scene_losses existed (the same float rounding).
     c = spec.config(cfg)
     pred = np.concatenate([predict(model, c.input_of(split.aif[i : i + 1], split.bokeh[i : i + 1]))
-                           for i in range(len(split))]) if len(split) else split.disparity
-    return float(scene_losses(spec, cfg, split, pred).mean()) if len(split) else 0.0
+                           for i in range(len(split))])
+    return float(scene_losses(spec, cfg, split, pred).mean())
 
 
 def log_line(msg: str) -> None:
