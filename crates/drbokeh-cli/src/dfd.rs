@@ -324,13 +324,14 @@ pub fn run(a: &DfdArgs) -> Result<()> {
                 aif.height
             );
         }
-        if d.data
-            .iter()
-            .any(|v| !v.is_finite() || *v < 0.0 || *v > 1.0)
-        {
+        if let Some(i) = d.data.iter().position(|v| !(0.0..=1.0).contains(v)) {
             bail!(
-                "{}: disparity values must be finite and in [0, 1]",
-                path.display()
+                "{}: initial disparity {} at pixel x={}, y={} is outside [0, 1] \
+                 (normalised disparity: 0 far, 1 near)",
+                path.display(),
+                d.data[i],
+                i % d.width,
+                i / d.width
             );
         }
         o.initial_disparity = Some(d);

@@ -118,6 +118,26 @@ fn dfd_rejects_bad_input() {
         "{}",
         stderr(&o)
     );
+    // A start outside [0, 1]: the file, the value and the pixel are named.
+    let mut start = ndarray::Array2::<f32>::from_elem((32, 32), 0.5);
+    start[[2, 3]] = -0.25;
+    let init = d.path().join("init.npy");
+    ndarray_npy::write_npy(&init, &start).unwrap();
+    let o = run(&[
+        "--defocused",
+        p(&a),
+        "--initial-disparity",
+        p(&init),
+        "--output",
+        p(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o)
+            .contains("init.npy: initial disparity -0.25 at pixel x=3, y=2 is outside [0, 1]"),
+        "{}",
+        stderr(&o)
+    );
     assert!(!out.exists());
 }
 

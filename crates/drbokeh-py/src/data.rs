@@ -7,7 +7,7 @@ use crate::pool::Workers;
 use crate::render::stack_args;
 use drbokeh::io::{self, DepthKind, DisparityOptions};
 use drbokeh::trace::{self, SceneSpec};
-use drbokeh::{Image, NoProgress};
+use drbokeh::NoProgress;
 use numpy::{PyArrayDescr, PyArrayDescrMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -237,18 +237,7 @@ pub fn trace_scene<'py>(
             })
         })
         .or_raise()?;
-    let disparity = Image {
-        width: outputs.pinhole.depth_mm.width,
-        height: outputs.pinhole.depth_mm.height,
-        channels: 1,
-        data: outputs
-            .pinhole
-            .depth_mm
-            .data
-            .iter()
-            .map(|&z| loaded.disparity_of_depth(z as f64) as f32)
-            .collect(),
-    };
+    let disparity = loaded.disparity_map(&outputs.pinhole.depth_mm);
     let d = PyDict::new(py);
     d.set_item(
         "bokeh",

@@ -239,18 +239,7 @@ fn traced_pair(seed: u64) -> (Image<f32>, Image<f32>, Image<f32>, f64, f64) {
     };
     let aif = clip(trace::encode_image(&out.pinhole.aif_linear));
     let bokeh = clip(trace::encode_image(&out.defocus_linear));
-    let truth = Image {
-        width: out.pinhole.depth_mm.width,
-        height: out.pinhole.depth_mm.height,
-        channels: 1,
-        data: out
-            .pinhole
-            .depth_mm
-            .data
-            .iter()
-            .map(|&z| scene.disparity_of_depth(z as f64) as f32)
-            .collect(),
-    };
+    let truth = scene.disparity_map(&out.pinhole.depth_mm);
     let focus = scene.focus_disparity().clamp(0.0, 1.0);
     (aif, bokeh, truth, scene.blur_k_px(), focus)
 }

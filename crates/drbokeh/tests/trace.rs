@@ -389,3 +389,47 @@ fn in_focus_plane_matches_all_in_focus_through_real_lens() {
         "defocused {defocused:.2} dB vs in focus {in_focus:.2} dB"
     );
 }
+
+/// The disparity map the tracer writes is in [0, 1]: the depths of the nearest and
+/// farthest billboards, rounded to `f32` as the pinhole pass stores them, give 1 and 0 up
+/// to that rounding and never outside [0, 1] (the plain formula falls outside by the
+/// rounding, e.g. -1e-9, in some scenes, and
+/// `drbokeh dfd --initial-disparity` refuses such a map); a depth really outside the
+/// billboards' range is left as it is.
+#[test]
+fn traced_disparity_map_is_in_the_unit_range() {
+    let mut raw_outside = 0;
+    for index in 0..24 {
+        let (scene, _) = small_benchmark_scene(index, 32, 4);
+        let (near, far) = scene.depth_range_mm();
+        let depths = [
+            far as f32,
+            near as f32,
+            (0.5 * (near + far)) as f32,
+            (far * 1.1) as f32,
+        ];
+        for z in &depths[..2] {
+            let raw = scene.disparity_of_depth(*z as f64);
+            if !(0.0..=1.0).contains(&raw) {
+                raw_outside += 1;
+            }
+        }
+        let map = scene.disparity_map(&Image::from_vec(4, 1, 1, depths.to_vec()).unwrap());
+        let (farthest, nearest) = (map.data[0], map.data[1]);
+        assert!((0.0..1e-6).contains(&farthest), "scene {index}: {farthest}");
+        assert!(
+            nearest > 1.0 - 1e-6 && nearest <= 1.0,
+            "scene {index}: {nearest}"
+        );
+        assert!(map.data[2] > 0.0 && map.data[2] < 1.0, "scene {index}");
+        assert_eq!(
+            map.data[3],
+            scene.disparity_of_depth(depths[3] as f64) as f32
+        );
+        assert!(map.data[3] < -1e-3, "scene {index}: beyond the farthest");
+    }
+    assert!(
+        raw_outside > 0,
+        "no scene needed the snap: the test shows nothing"
+    );
+}

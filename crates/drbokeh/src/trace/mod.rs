@@ -230,18 +230,7 @@ pub fn stage_scene_dir(
     io::write_output(&t.join("bokeh.exr"), &bokeh, BitDepth::Sixteen, to_linear)?;
     io::write_output(&t.join("aif.png"), &aif, BitDepth::Sixteen, to_linear)?;
     io::write_output(&t.join("aif.exr"), &aif, BitDepth::Sixteen, to_linear)?;
-    let disparity = Image {
-        width: out.pinhole.depth_mm.width,
-        height: out.pinhole.depth_mm.height,
-        channels: 1,
-        data: out
-            .pinhole
-            .depth_mm
-            .data
-            .iter()
-            .map(|&z| scene.disparity_of_depth(z as f64) as f32)
-            .collect(),
-    };
+    let disparity = scene.disparity_map(&out.pinhole.depth_mm);
     write_npy(&t.join("depth.npy"), &out.pinhole.depth_mm)?;
     write_npy(&t.join("disparity.npy"), &disparity)?;
     write_grey16(&t.join("disparity.png"), &disparity)?;

@@ -42,6 +42,7 @@ use super::optics::{LensModel, Optics, SphericalLens};
 use super::procedural::{self, HighlightRange, ProceduralKind};
 use super::sampling::strata_side;
 use super::texture::{decode_display, Texture};
+use crate::image::Image;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -628,6 +629,27 @@ impl Scene {
         normalised_disparity(depth_mm, near, far)
     }
 
+    /// Normalised disparity of every pixel of a depth map in mm (the tracer's pinhole
+    /// pass). The depths there are `f32`, so the
+    /// nearest and farthest billboards give 1 and 0 only up to that rounding (e.g.
+    /// -1.02e-9); values within [`PIXEL_DISPARITY_SNAP`] of [0, 1] are snapped into it,
+    /// so the map is a valid disparity for every command (`drbokeh dfd
+    /// --initial-disparity` refuses values outside [0, 1]).
+    pub fn disparity_map(&self, depth_mm: &Image<f32>) -> Image<f32> {
+        Image {
+            width: depth_mm.width,
+            height: depth_mm.height,
+            channels: 1,
+            data: depth_mm
+                .data
+                .iter()
+                .map(|&z| {
+                    snap_into_unit(self.disparity_of_depth(z as f64), PIXEL_DISPARITY_SNAP) as f32
+                })
+                .collect(),
+        }
+    }
+
     /// Depths of the nearest and farthest billboards, mm.
     pub fn depth_range_mm(&self) -> (f64, f64) {
         (
@@ -655,7 +677,17 @@ impl Scene {
 /// farthest billboard computes 1 or 0 up to rounding (e.g. 1.0000000000000002), and the
 /// recorded value must be a valid `--focus`.
 pub fn snap_unit(v: f64) -> f64 {
-    if (-1e-9..=1.0 + 1e-9).contains(&v) {
+    snap_into_unit(v, 1e-9)
+}
+
+/// How far outside [0, 1] a pixel's disparity may fall from the `f32` rounding of its
+/// depth and still be snapped into it ([`Scene::disparity_map`]): the rounding moves a
+/// disparity by about 1e-7 times `(1/z) / (1/z_near - 1/z_far)`.
+pub const PIXEL_DISPARITY_SNAP: f64 = 1e-5;
+
+/// `v` clamped into [0, 1] when it lies within `tolerance` of it; unchanged otherwise.
+fn snap_into_unit(v: f64, tolerance: f64) -> f64 {
+    if (-tolerance..=1.0 + tolerance).contains(&v) {
         v.clamp(0.0, 1.0)
     } else {
         v
