@@ -75,6 +75,11 @@ pub struct OptimiserArgs {
     /// in the weighted median falls to exp(-1/2) (default 0.05).
     #[arg(long, value_name = "SIGMA")]
     pub median_sigma: Option<f64>,
+    /// Second pass of the plane sweep: its candidates are rendered behind the first pass's
+    /// estimate eroded by F times the largest blur radius, so pixels beside a nearer object
+    /// are judged with the object in front of them (default 0.5; 0: one pass).
+    #[arg(long, value_name = "F")]
+    pub sweep_context: Option<f64>,
     /// Colour vote on the result, with N bins per channel (default 0: off; 16 was tuned):
     /// pixels whose all-in-focus colour falls in one of N^3 cubes take the median disparity
     /// of all of them, where at least half of the cube agrees. A prior that each surface has
@@ -134,6 +139,9 @@ impl OptimiserArgs {
                 None => bail!("invalid parameter --median-sigma: the median refinement is off (--median-radius 0)"),
             }
         }
+        if let Some(f) = self.sweep_context {
+            o.sweep_context = (f != 0.0).then_some(f);
+        }
         if let Some(b) = self.colour_bins {
             o.colour_vote = (b > 0).then_some(b);
         }
@@ -183,7 +191,9 @@ fn parse_init(s: &str) -> Result<Init> {
 /// same. Focus on the nearest (focus 1) or the farthest (focus 0) object if you can.
 ///
 /// Loss: 0.5 L1 + 20 G (edge-aware smoothness) + 10 HSSIM (SSIM at windows 3 to 31),
-/// started from a plane sweep, at the finest scale a cost budget allows; clipped
+/// started from a plane sweep in two passes (the second renders each candidate plane
+/// behind the first pass's nearer objects, so their edges do not spread over what lies
+/// behind them), at the finest scale a cost budget allows; clipped
 /// highlights of the all-in-focus image are modelled (their lost energy is found in the
 /// defocused image); pixels the defocused image clips are left out. The result is refined
 /// by an edge-aware weighted median (and, with --colour-bins 16, a colour vote: pixels of

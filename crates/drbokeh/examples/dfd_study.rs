@@ -143,6 +143,10 @@ fn main() {
         } else {
             None
         };
+        if let Some(f) = kv.get("ctx") {
+            let f: f64 = f.parse().unwrap();
+            o.sweep_context = (f > 0.0).then_some(f);
+        }
         if get("from_truth", "0") == "1" {
             o.initial_disparity = Some(scene.disparity.clone());
         }

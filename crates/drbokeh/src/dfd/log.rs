@@ -14,7 +14,7 @@
 //!   "parameterisation": "sigmoid" | "clamped", "optimiser": "shared_adam" | "adam",
 //!   "highlights": "model" | "mask" | "ignore",
 //!   "median": { "radius_blur_fraction", "sigma" } | null, "colour_vote": bins (absent: off),
-//!   "init": { "constant": v } | { "sweep": n },
+//!   "init": { "constant": v } | { "sweep": n }, "sweep_context": fraction (absent: one pass),
 //!   "initial_disparity_given": bool, "engine": "fast" | "threaded" | "reference",
 //!   "clipped_aif_pixels", "clipped_target_pixels", "masked_fraction",
 //!   "scales": [ { "scale", "width", "height", "blur", "iterations", "stopped_on_plateau",
@@ -105,6 +105,10 @@ pub struct RunOptions {
     pub colour_vote: Option<usize>,
     /// Initialisation.
     pub init: Init,
+    /// Erosion of the sweep's second pass, as a fraction of the largest blur (absent: one
+    /// pass).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sweep_context: Option<f64>,
     /// Whether a starting disparity map was given (it replaces `init`).
     pub initial_disparity_given: bool,
     /// Engine of the Dr.Bokeh layer.
@@ -131,6 +135,7 @@ impl RunOptions {
             median: options.median,
             colour_vote: options.colour_vote,
             init: options.init,
+            sweep_context: options.sweep_context,
             initial_disparity_given: options.initial_disparity.is_some(),
             engine: format!("{:?}", options.engine).to_lowercase(),
             layered: options.layered,

@@ -7,7 +7,7 @@ use super::maps::{
     weighted_median,
 };
 use super::objective::{structure_min_side, ImageObjective, SMOOTHNESS_MIN_SIDE};
-use super::sweep::sweep;
+use super::sweep::{min_filter, sweep, Planes};
 use super::{
     render_layer_on, render_layer_vjp_on, DfdOptions, DfdResult, Highlights, Init, Optimiser,
     Parameterisation, CONFIDENCE_HALF_SENSITIVITY,
@@ -360,7 +360,18 @@ pub fn estimate_disparity<T: Real>(
                     let ft: Image<T> = to_image(&fl.target, fw, fh, 3);
                     let radius =
                         ((fs.camera.blur_k * max_rel / 2.0).round() as usize).max(SWEEP_RADIUS);
-                    let mut d = sweep(options, &fs, &aif, &ft, &fl.excluded, n, radius)?;
+                    let mut planes = Planes {
+                        count: n,
+                        window_radius: radius,
+                        front: None,
+                    };
+                    let mut d = sweep(options, &fs, &aif, &ft, &fl.excluded, &planes)?;
+                    if let Some(fraction) = options.sweep_context {
+                        let erode_px = (fs.camera.blur_k * max_rel * fraction).round() as usize;
+                        let front = min_filter(&d, fw, fh, erode_px);
+                        planes.front = Some(&front);
+                        d = sweep(options, &fs, &aif, &ft, &fl.excluded, &planes)?;
+                    }
                     let (mut mw, mut mh) = (fw, fh);
                     for _ in finest..scale {
                         d = pool(&d, mw, mh, 1);

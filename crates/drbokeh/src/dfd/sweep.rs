@@ -5,21 +5,33 @@ use super::{render_layer_on, DfdOptions};
 use crate::image::Image;
 use crate::{Real, Result};
 
-/// Plane sweep at one scale: for each of `n` constant disparities, the absolute difference
-/// between its render and the target, averaged over a `(2 radius + 1)^2` window with
-/// edge-aware weights (pixels of a similar colour in the all-in-focus image count more:
-/// [`guided_mean`]; left-out pixels count zero); each pixel takes the disparity with the
-/// smallest difference, refined between the sampled disparities by a parabola through the
-/// smallest difference and its two neighbours.
+/// The candidate planes of one sweep pass.
+pub(super) struct Planes<'a> {
+    /// Number of constant disparities, evenly spaced over [0, 1].
+    pub count: usize,
+    /// Radius of the cost window, px.
+    pub window_radius: usize,
+    /// A disparity kept in front of every candidate (the second pass,
+    /// [`super::DfdOptions::sweep_context`]): the candidate `d` renders `max(front, d)`,
+    /// and a pixel takes only candidates `d >= front`. `None`: plain planes.
+    pub front: Option<&'a [f64]>,
+}
+
+/// Plane sweep at one scale: for each of `planes.count` constant disparities, the absolute
+/// difference between its render and the target, averaged over a `(2 radius + 1)^2`
+/// window with edge-aware weights (pixels of a similar colour in the all-in-focus image
+/// count more: [`guided_mean`]; left-out pixels count zero); each pixel takes the
+/// disparity with the smallest difference, refined between the sampled disparities by a
+/// parabola through the smallest difference and its two neighbours.
 pub(super) fn sweep<T: Real>(
     options: &DfdOptions,
     settings: &crate::RenderSettings,
     aif: &Image<T>,
     target: &Image<T>,
     excluded: &[bool],
-    n: usize,
-    radius: usize,
+    planes: &Planes,
 ) -> Result<Vec<f64>> {
+    let (n, radius, behind) = (planes.count, planes.window_radius, planes.front);
     let (w, h) = (aif.width, aif.height);
     let guide: Vec<[f64; 3]> = aif
         .data
@@ -29,7 +41,11 @@ pub(super) fn sweep<T: Real>(
     let mut costs: Vec<Vec<f64>> = Vec::with_capacity(n);
     for k in 0..n {
         let d = k as f64 / (n - 1) as f64;
-        let disp: Image<T> = to_image(&vec![d; w * h], w, h, 1);
+        let plane: Vec<f64> = match behind {
+            Some(front) => front.iter().map(|&f| f.max(d)).collect(),
+            None => vec![d; w * h],
+        };
+        let disp: Image<T> = to_image(&plane, w, h, 1);
         let render = render_layer_on(options.layer, options.engine, aif, &disp, settings)?;
         let err: Vec<f64> = (0..w * h)
             .map(|i| {
@@ -51,14 +67,18 @@ pub(super) fn sweep<T: Real>(
     Ok((0..w * h)
         .map(|i| {
             let (mut best, mut bk) = (f64::INFINITY, 0);
-            for (k, c) in costs.iter().enumerate() {
+            let first = match behind {
+                Some(front) => ((front[i] / step - 1e-9).ceil().max(0.0) as usize).min(n - 1),
+                None => 0,
+            };
+            for (k, c) in costs.iter().enumerate().skip(first) {
                 if c[i] < best {
                     best = c[i];
                     bk = k;
                 }
             }
             let mut d = bk as f64 * step;
-            if bk > 0 && bk + 1 < n {
+            if bk > first && bk + 1 < n {
                 let (a, b, c) = (costs[bk - 1][i], costs[bk][i], costs[bk + 1][i]);
                 let curv = a - 2.0 * b + c;
                 if curv > 1e-12 {
@@ -99,4 +119,29 @@ fn guided_mean(data: &[f64], guide: &[[f64; 3]], w: usize, h: usize, r: usize) -
             s / n
         })
         .collect()
+}
+
+/// Minimum of a one-channel map over a `(2r+1)^2` window (separable): the erosion of the
+/// nearer (larger) disparities.
+pub(super) fn min_filter(data: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
+    let mut rows = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (a, b) = (x.saturating_sub(r), (x + r + 1).min(w));
+            rows[y * w + x] = data[y * w + a..y * w + b]
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min);
+        }
+    }
+    let mut out = vec![0.0; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (a, b) = (y.saturating_sub(r), (y + r + 1).min(h));
+            out[y * w + x] = (a..b)
+                .map(|yy| rows[yy * w + x])
+                .fold(f64::INFINITY, f64::min);
+        }
+    }
+    out
 }
