@@ -13,7 +13,8 @@ pub(super) struct Planes<'a> {
     pub window_radius: usize,
     /// A disparity kept in front of every candidate (the second pass,
     /// [`super::DfdOptions::sweep_context`]): the candidate `d` renders `max(front, d)`,
-    /// and a pixel takes only candidates `d >= front`. `None`: plain planes.
+    /// and a pixel takes only `front` itself or candidates `d >= front`. `None`: plain
+    /// planes.
     pub front: Option<&'a [f64]>,
 }
 
@@ -65,29 +66,66 @@ pub(super) fn sweep<T: Real>(
     }
     let step = 1.0 / (n - 1) as f64;
     Ok((0..w * h)
-        .map(|i| {
-            let (mut best, mut bk) = (f64::INFINITY, 0);
-            let first = match behind {
-                Some(front) => ((front[i] / step - 1e-9).ceil().max(0.0) as usize).min(n - 1),
-                None => 0,
-            };
-            for (k, c) in costs.iter().enumerate().skip(first) {
-                if c[i] < best {
-                    best = c[i];
-                    bk = k;
-                }
-            }
-            let mut d = bk as f64 * step;
-            if bk > first && bk + 1 < n {
-                let (a, b, c) = (costs[bk - 1][i], costs[bk][i], costs[bk + 1][i]);
-                let curv = a - 2.0 * b + c;
-                if curv > 1e-12 {
-                    d += 0.5 * (a - c) / curv * step;
-                }
-            }
-            d.clamp(0.0, 1.0)
+        .map(|i| match behind {
+            None => pick_uniform(&costs, i, step),
+            Some(front) => pick_behind(&costs, i, step, front[i]),
         })
         .collect())
+}
+
+/// One pass's pick for pixel `i` among plain planes: the sample of least cost, refined
+/// between samples by a parabola through it and its two neighbours.
+fn pick_uniform(costs: &[Vec<f64>], i: usize, step: f64) -> f64 {
+    let n = costs.len();
+    let bk = (0..n).fold(0, |b, k| if costs[k][i] < costs[b][i] { k } else { b });
+    let mut d = bk as f64 * step;
+    if bk > 0 && bk + 1 < n {
+        let (a, b, c) = (costs[bk - 1][i], costs[bk][i], costs[bk + 1][i]);
+        let curv = a - 2.0 * b + c;
+        if curv > 1e-12 {
+            d += 0.5 * (a - c) / curv * step;
+        }
+    }
+    d.clamp(0.0, 1.0)
+}
+
+/// The second pass's pick for pixel `i`, whose eroded first estimate is `front`: among
+/// `front` itself and the samples behind it (`d >= front`). The first plane renders
+/// `max(front, 0) = front` everywhere, so its cost is the cost of `front` at this pixel;
+/// with it as the lower sample, a pixel whose best sample is the first one behind `front`
+/// is refined between the two as well (a parabola through three unevenly spaced samples),
+/// instead of keeping the sweep's step.
+fn pick_behind(costs: &[Vec<f64>], i: usize, step: f64, front: f64) -> f64 {
+    let n = costs.len();
+    let first = ((front / step - 1e-9).ceil().max(0.0) as usize).min(n - 1);
+    // The samples at or behind `front`, in increasing disparity: (disparity, cost).
+    let mut samples: Vec<(f64, f64)> = Vec::with_capacity(n + 1);
+    if first > 0 && front < first as f64 * step - 1e-9 {
+        samples.push((front, costs[0][i]));
+    }
+    samples.extend((first..n).map(|k| (k as f64 * step, costs[k][i])));
+    let bj = (0..samples.len()).fold(0, |b, j| if samples[j].1 < samples[b].1 { j } else { b });
+    let mut d = samples[bj].0;
+    if bj > 0 && bj + 1 < samples.len() {
+        d = parabola_vertex(samples[bj - 1], samples[bj], samples[bj + 1]).unwrap_or(d);
+    }
+    d.clamp(front.clamp(0.0, 1.0), 1.0)
+}
+
+/// The vertex of the parabola through three samples `(x, y)` with `x0 < x1 < x2` and
+/// `y1` the least, clamped to `[x0, x2]`; `None` where the three are (nearly) collinear.
+fn parabola_vertex(
+    (x0, y0): (f64, f64),
+    (x1, y1): (f64, f64),
+    (x2, y2): (f64, f64),
+) -> Option<f64> {
+    let (a, b) = (x1 - x0, x1 - x2);
+    let num = a * a * (y1 - y2) - b * b * (y1 - y0);
+    let den = a * (y1 - y2) - b * (y1 - y0);
+    if den.abs() < 1e-15 {
+        return None;
+    }
+    Some((x1 - 0.5 * num / den).clamp(x0, x2))
 }
 
 /// Colour distance (encoded, RMS over channels) at which [`guided_mean`]'s weight is
@@ -144,4 +182,35 @@ pub(super) fn min_filter(data: &[f64], w: usize, h: usize, r: usize) -> Vec<f64>
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{parabola_vertex, pick_behind};
+
+    /// Unevenly spaced samples of `(x - 0.3)^2 + 1` give the vertex back; collinear ones
+    /// give none.
+    #[test]
+    fn parabola_vertex_of_uneven_samples() {
+        let f = |x: f64| (x - 0.3) * (x - 0.3) + 1.0;
+        let v = parabola_vertex((0.1, f(0.1)), (0.25, f(0.25)), (0.5, f(0.5))).unwrap();
+        assert!((v - 0.3).abs() < 1e-12, "vertex {v}");
+        assert_eq!(parabola_vertex((0.0, 1.0), (0.5, 1.0), (1.0, 1.0)), None);
+    }
+
+    /// The second pass's pick takes the eroded estimate's own cost (plane 0) as its lowest
+    /// sample: a pixel whose costs fall towards it is refined below the first sample behind
+    /// it, and it never goes in front of it.
+    #[test]
+    fn second_pass_pick_refines_between_the_front_and_the_first_sample() {
+        // Nine planes (step 1/8), front 0.3: the first sample behind it is 0.375.
+        let f = |x: f64| (x - 0.34) * (x - 0.34);
+        let costs: Vec<Vec<f64>> = (0..9).map(|k| vec![f((k as f64 / 8.0).max(0.3))]).collect();
+        let d = pick_behind(&costs, 0, 1.0 / 8.0, 0.3);
+        assert!((d - 0.34).abs() < 1e-9, "pick {d}");
+        // Costs that fall in front of the front: the pick stays at the front.
+        let g = |x: f64| x;
+        let costs: Vec<Vec<f64>> = (0..9).map(|k| vec![g((k as f64 / 8.0).max(0.3))]).collect();
+        assert_eq!(pick_behind(&costs, 0, 1.0 / 8.0, 0.3), 0.3);
+    }
 }
