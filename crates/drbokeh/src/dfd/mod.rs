@@ -361,10 +361,10 @@ pub struct DfdOptions {
     /// A second pass of the plane sweep ([`Init::Sweep`]; `None`: one pass). The first
     /// pass's estimate, eroded (a minimum filter) by this fraction of the largest blur
     /// radius, is kept in front of every candidate plane, and a pixel takes only its eroded
-    /// estimate or the candidates behind it (refined between them). So a pixel beside a nearer object is
-    /// judged with that object rendered in front of it, not with the object spread over it
-    /// at the candidate's depth: the first pass labels such pixels with the nearer depth
-    /// (the foreground fattened by about a blur radius). Default
+    /// estimate or the candidates behind it (refined between them). So a pixel beside a
+    /// nearer object is judged with that object rendered in front of it, not with the
+    /// object spread over it at the candidate's depth: the first pass labels such pixels
+    /// with the nearer depth (the foreground fattened by about a blur radius). Default
     /// [`DEFAULT_SWEEP_CONTEXT`] (`docs/dfd.md`).
     pub sweep_context: Option<f64>,
     /// A starting disparity map (the pair's size, one channel) instead of [`DfdOptions::init`];
