@@ -493,9 +493,12 @@ impl DfdOptions {
                 "init",
                 format!("initial disparity must be in [0, 1], got {v}"),
             )),
-            Init::Sweep(n) if !(2..=64).contains(&n) => Err(Error::param(
+            Init::Sweep(n) if !(2..=sweep::MAX_PLANES).contains(&n) => Err(Error::param(
                 "init",
-                format!("a sweep needs 2 to 64 disparities, got {n}"),
+                format!(
+                    "a sweep needs 2 to {} disparities, got {n}",
+                    sweep::MAX_PLANES
+                ),
             )),
             _ => Ok(()),
         }

@@ -73,20 +73,13 @@ pub(super) fn sweep<T: Real>(
         .collect())
 }
 
-/// One pass's pick for pixel `i` among plain planes: the sample of least cost, refined
-/// between samples by a parabola through it and its two neighbours.
+/// One pass's pick for pixel `i` among plain planes: every plane is a sample.
 fn pick_uniform(costs: &[Vec<f64>], i: usize, step: f64) -> f64 {
-    let n = costs.len();
-    let bk = (0..n).fold(0, |b, k| if costs[k][i] < costs[b][i] { k } else { b });
-    let mut d = bk as f64 * step;
-    if bk > 0 && bk + 1 < n {
-        let (a, b, c) = (costs[bk - 1][i], costs[bk][i], costs[bk + 1][i]);
-        let curv = a - 2.0 * b + c;
-        if curv > 1e-12 {
-            d += 0.5 * (a - c) / curv * step;
-        }
+    let mut samples = [(0.0, 0.0); MAX_PLANES + 1];
+    for (k, plane) in costs.iter().enumerate() {
+        samples[k] = (k as f64 * step, plane[i]);
     }
-    d.clamp(0.0, 1.0)
+    pick(&samples[..costs.len()]).clamp(0.0, 1.0)
 }
 
 /// The second pass's pick for pixel `i`, whose eroded first estimate is `front`: among
@@ -98,18 +91,32 @@ fn pick_uniform(costs: &[Vec<f64>], i: usize, step: f64) -> f64 {
 fn pick_behind(costs: &[Vec<f64>], i: usize, step: f64, front: f64) -> f64 {
     let n = costs.len();
     let first = ((front / step - 1e-9).ceil().max(0.0) as usize).min(n - 1);
-    // The samples at or behind `front`, in increasing disparity: (disparity, cost).
-    let mut samples: Vec<(f64, f64)> = Vec::with_capacity(n + 1);
+    let mut samples = [(0.0, 0.0); MAX_PLANES + 1];
+    let mut len = 0;
     if first > 0 && front < first as f64 * step - 1e-9 {
-        samples.push((front, costs[0][i]));
+        samples[0] = (front, costs[0][i]);
+        len = 1;
     }
-    samples.extend((first..n).map(|k| (k as f64 * step, costs[k][i])));
-    let bj = (0..samples.len()).fold(0, |b, j| if samples[j].1 < samples[b].1 { j } else { b });
-    let mut d = samples[bj].0;
-    if bj > 0 && bj + 1 < samples.len() {
-        d = parabola_vertex(samples[bj - 1], samples[bj], samples[bj + 1]).unwrap_or(d);
+    for (k, plane) in costs.iter().enumerate().skip(first) {
+        samples[len] = (k as f64 * step, plane[i]);
+        len += 1;
     }
-    d.clamp(front.clamp(0.0, 1.0), 1.0)
+    pick(&samples[..len]).clamp(front.clamp(0.0, 1.0), 1.0)
+}
+
+/// The largest number of planes of one pass ([`super::Init::Sweep`]).
+pub(super) const MAX_PLANES: usize = 64;
+
+/// The pick among `(disparity, cost)` samples in increasing disparity (the same for both
+/// passes): the sample of least cost (the first of equals), refined by the parabola through
+/// it and its two neighbours where it has both.
+fn pick(samples: &[(f64, f64)]) -> f64 {
+    let best = (0..samples.len()).fold(0, |b, j| if samples[j].1 < samples[b].1 { j } else { b });
+    let d = samples[best].0;
+    if best == 0 || best + 1 == samples.len() {
+        return d;
+    }
+    parabola_vertex(samples[best - 1], samples[best], samples[best + 1]).unwrap_or(d)
 }
 
 /// The vertex of the parabola through three samples `(x, y)` with `x0 < x1 < x2` and
@@ -186,7 +193,34 @@ pub(super) fn min_filter(data: &[f64], w: usize, h: usize, r: usize) -> Vec<f64>
 
 #[cfg(test)]
 mod tests {
-    use super::{parabola_vertex, pick_behind};
+    use super::{parabola_vertex, pick_behind, pick_uniform, MAX_PLANES};
+
+    /// The one-pass pick over evenly spaced planes is the closed-form vertex
+    /// `x1 + step (a - c) / (2 (a - 2b + c))` of the three samples around the least cost
+    /// (the formula of the one-pass code before the two picks shared [`super::pick`]), and
+    /// the largest sweep fits.
+    #[test]
+    fn one_pass_pick_is_the_even_spacing_vertex() {
+        for n in [2, 3, 9, MAX_PLANES] {
+            let step = 1.0 / (n - 1) as f64;
+            for centre in [0.0, 0.13, 0.5, 0.77, 1.0] {
+                // An asymmetric bowl, so the vertex of three samples is not the minimum.
+                let f = |x: f64| (x - centre).abs().powf(1.5) + 0.1;
+                let costs: Vec<Vec<f64>> = (0..n).map(|k| vec![f(k as f64 * step)]).collect();
+                let best = (0..n).fold(0, |b, k| if costs[k][0] < costs[b][0] { k } else { b });
+                let mut want = best as f64 * step;
+                if best > 0 && best + 1 < n {
+                    let (a, b, c) = (costs[best - 1][0], costs[best][0], costs[best + 1][0]);
+                    want += 0.5 * (a - c) / (a - 2.0 * b + c) * step;
+                }
+                let got = pick_uniform(&costs, 0, step);
+                assert!(
+                    (got - want).abs() < 1e-12,
+                    "n {n} centre {centre}: {got} vs {want}"
+                );
+            }
+        }
+    }
 
     /// Unevenly spaced samples of `(x - 0.3)^2 + 1` give the vertex back; collinear ones
     /// give none.
