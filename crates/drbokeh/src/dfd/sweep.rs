@@ -66,20 +66,8 @@ pub(super) fn sweep<T: Real>(
     }
     let step = 1.0 / (n - 1) as f64;
     Ok((0..w * h)
-        .map(|i| match behind {
-            None => pick_uniform(&costs, i, step),
-            Some(front) => pick_behind(&costs, i, step, front[i]),
-        })
+        .map(|i| pick_behind(&costs, i, step, behind.map_or(0.0, |front| front[i])))
         .collect())
-}
-
-/// One pass's pick for pixel `i` among plain planes: every plane is a sample.
-fn pick_uniform(costs: &[Vec<f64>], i: usize, step: f64) -> f64 {
-    let mut samples = [(0.0, 0.0); MAX_PLANES + 1];
-    for (k, plane) in costs.iter().enumerate() {
-        samples[k] = (k as f64 * step, plane[i]);
-    }
-    pick(&samples[..costs.len()]).clamp(0.0, 1.0)
 }
 
 /// The second pass's pick for pixel `i`, whose eroded first estimate is `front`: among
@@ -87,7 +75,8 @@ fn pick_uniform(costs: &[Vec<f64>], i: usize, step: f64) -> f64 {
 /// `max(front, 0) = front` everywhere, so its cost is the cost of `front` at this pixel;
 /// with it as the lower sample, a pixel whose best sample is the first one behind `front`
 /// is refined between the two as well (a parabola through three unevenly spaced samples),
-/// instead of keeping the sweep's step.
+/// instead of keeping the sweep's step. With `front` 0 (the first pass: nothing in front)
+/// every plane is a sample.
 fn pick_behind(costs: &[Vec<f64>], i: usize, step: f64, front: f64) -> f64 {
     let n = costs.len();
     let first = ((front / step - 1e-9).ceil().max(0.0) as usize).min(n - 1);
@@ -193,9 +182,9 @@ pub(super) fn min_filter(data: &[f64], w: usize, h: usize, r: usize) -> Vec<f64>
 
 #[cfg(test)]
 mod tests {
-    use super::{parabola_vertex, pick_behind, pick_uniform, MAX_PLANES};
+    use super::{parabola_vertex, pick_behind, MAX_PLANES};
 
-    /// The one-pass pick over evenly spaced planes is the closed-form vertex
+    /// The one-pass pick (`front` 0) over evenly spaced planes is the closed-form vertex
     /// `x1 + step (a - c) / (2 (a - 2b + c))` of the three samples around the least cost
     /// (the formula of the one-pass code before the two picks shared [`super::pick`]), and
     /// the largest sweep fits.
@@ -213,7 +202,7 @@ mod tests {
                     let (a, b, c) = (costs[best - 1][0], costs[best][0], costs[best + 1][0]);
                     want += 0.5 * (a - c) / (a - 2.0 * b + c) * step;
                 }
-                let got = pick_uniform(&costs, 0, step);
+                let got = pick_behind(&costs, 0, step, 0.0);
                 assert!(
                     (got - want).abs() < 1e-12,
                     "n {n} centre {centre}: {got} vs {want}"
