@@ -10,6 +10,9 @@
 //! as the photo), `oracle:px|tint|white[+gate]` (its clipped pixels or regions put back
 //! into the photo), `ogain[tint][-np]` (the default estimate with each region's gain, and
 //! with `tint` its tint, replaced by the true one; `-np` without the paper's boost).
+//! Prototype (not an oracle): `scene:C,LO,HI[,KPOW[,Q]]`, the default estimate with its
+//! cap and rim constant set per scene from the quantile `Q` of the regions' uncapped rim
+//! gains (`scene_pooled`; docs/highlights.md, "One exposure per photo").
 //!
 //! `SWEEP_SCENES=1` also prints each scene's PSNR; `SWEEP_DUMP=DIR` writes, per scene,
 //! `DIR/<benchmark>/<scene>/<spec>.npy` (display-encoded renders, float32) next to
@@ -79,7 +82,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 save("exr", &exr)?;
             }
             for spec in &specs {
-                let oracle_out = if let Some(mode) = spec.strip_prefix("ogain") {
+                let oracle_out = if let Some(mode) = spec.strip_prefix("scene:") {
+                    Some(scene_pooled(mode, &dir, &scene, preset)?)
+                } else if let Some(mode) = spec.strip_prefix("ogain") {
                     Some(oracle_gain(mode, &dir, &scene, preset)?)
                 } else if let Some(mode) = spec.strip_prefix("oracle:") {
                     Some(oracle(mode, &dir, &scene, preset)?)
@@ -296,6 +301,78 @@ fn oracle_gain(
             };
             (hi, tint)
         },
+    )?;
+    render_decomposed(preset, recovered, disparity, &cam, view)
+}
+
+/// Prototype: the default estimate with the cap `max` set per scene from the median of
+/// the regions' uncapped rim gains `k / x`: `cap = clamp(c * median, lo, hi)`; mode
+/// `c,lo,hi[,kscale]` (`kscale`: the rim constant also multiplied by
+/// `(cap / 3.5)^kscale`). Prints each scene's median with `SWEEP_SCENES`.
+fn scene_pooled(
+    mode: &str,
+    dir: &std::path::Path,
+    scene: &SceneInputs,
+    preset: drbokeh::Preset,
+) -> Result<drbokeh::image::Image<f32>, Box<dyn std::error::Error>> {
+    let v: Vec<f64> = mode
+        .split(',')
+        .map(|t| t.parse::<f64>())
+        .collect::<Result<_, _>>()?;
+    let (c, lo, hi) = (v[0], v[1], v[2]);
+    let kscale = v.get(3).copied().unwrap_or(0.0);
+    let png = drbokeh::io::read_rgb(&dir.join("aif.png"))?;
+    let cam = scene.camera();
+    let view = View {
+        photo_highlights: PhotoHighlights::PaperBoost,
+        gamma: cam.gamma,
+        preset,
+        ..View::default()
+    };
+    let disparity = drbokeh::highlight::lights_at_farthest_depth(&png, &scene.disparity)
+        .unwrap_or_else(|| scene.disparity.clone());
+    let mut est = drbokeh::highlight::HighlightEstimate::DEFAULT;
+    est.max_gain = 1000.0;
+    est.pool_max = 1000.0;
+    let mut raw = Vec::new();
+    est.apply_with(
+        &png,
+        &disparity,
+        scene.focus,
+        scene.blur_k,
+        &view.tone(),
+        |_, g, t| {
+            raw.push(g);
+            (g, t)
+        },
+    )?;
+    raw.sort_by(f64::total_cmp);
+    let q = |f: f64| {
+        raw.get(((raw.len() as f64 * f) as usize).min(raw.len().saturating_sub(1)))
+            .copied()
+            .unwrap_or(1.0)
+    };
+    let quant = v.get(4).copied().unwrap_or(0.5);
+    let med = q(quant);
+    let cap = (c * med).clamp(lo, hi);
+    let kf = (cap / 3.5).powf(kscale);
+    if std::env::var_os("SWEEP_SCENES").is_some() {
+        println!(
+            "{} regions {} q50 {:.2} q75 {:.2} q90 {:.2} cap {cap:.2}",
+            dir.display(),
+            raw.len(),
+            q(0.5),
+            q(0.75),
+            q(0.9)
+        );
+    }
+    let recovered = est.apply_with(
+        &png,
+        &disparity,
+        scene.focus,
+        scene.blur_k,
+        &view.tone(),
+        |_, g, t| ((g * kf).clamp(1.0, cap), t),
     )?;
     render_decomposed(preset, recovered, disparity, &cam, view)
 }

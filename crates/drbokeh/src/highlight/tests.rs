@@ -456,3 +456,57 @@ fn a_large_clipped_area_keeps_its_depth_map() {
     }
     assert!(lights_at_farthest_depth(&rgb, &map).is_none());
 }
+
+#[test]
+fn pooling_raises_the_cap_where_every_rim_is_faint_and_keeps_dim_scenes() {
+    // 16 clipped 2x2 blobs on a dark background, each with a lifted rim (its 8-ring).
+    // A faint rim (lift 0.01: rim gain K / x = 20) in every blob says the whole image
+    // was exposed for bright lights: pooling lifts the cap to `pool_max` and the rim
+    // constant with it. Bright rims (lift 0.3: K / x < 1) leave the default as it is.
+    let (w, h) = (48, 48);
+    let scene = |lift: f64| {
+        let mut lin = vec![0.05; w * h * 3];
+        for by in [6, 16, 26, 36] {
+            for bx in [6, 16, 26, 36] {
+                for y in by - 1..by + 3 {
+                    for x in bx - 1..bx + 3 {
+                        let inside = (bx..bx + 2).contains(&x) && (by..by + 2).contains(&y);
+                        let v = if inside { 1.0 } else { 0.05 + lift };
+                        lin[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&[v; 3]);
+                    }
+                }
+            }
+        }
+        encode_lin(&lin, w, h)
+    };
+    let mut disp = Image::<f64>::new(w, h, 1);
+    disp.data.iter_mut().for_each(|v| *v = 1.0);
+    let plain = HighlightEstimate {
+        tint: false,
+        ..HighlightEstimate::DEFAULT
+    };
+    let pooled = HighlightEstimate { pool: 0.9, ..plain };
+    let centre = |e: &HighlightEstimate, img: &Image<f64>| {
+        let out = e.apply(img, &disp, 0.0, 30.0, &tone()).unwrap();
+        tone().linearize(out.data[3 * (16 * w + 16)])
+    };
+    let faint = scene(0.01);
+    // Unpooled: K / x = 20 is capped at 3.5 (the 2x2 blob has no interior: edge
+    // pixels get g^0.65).
+    let g_plain = centre(&plain, &faint);
+    let g_pooled = centre(&pooled, &faint);
+    assert!((g_plain - 3.5f64.powf(0.65)).abs() < 1e-6, "{g_plain}");
+    assert!((g_pooled - 10f64.powf(0.65)).abs() < 1e-6, "{g_pooled}");
+    let bright = scene(0.3);
+    let a = plain.apply(&bright, &disp, 0.0, 30.0, &tone()).unwrap();
+    let b = pooled.apply(&bright, &disp, 0.0, 30.0, &tone()).unwrap();
+    assert_eq!(a.data, b.data);
+    // The key parses and is validated.
+    let e = HighlightEstimate::parse("auto:pool=0.9,poolq=0.8,poolmax=12,poolk=0.5").unwrap();
+    assert_eq!(
+        (e.pool, e.pool_quantile, e.pool_max, e.pool_k_power),
+        (0.9, 0.8, 12.0, 0.5)
+    );
+    assert!(HighlightEstimate::parse("auto:pool=0.9,poolmax=2").is_err());
+    assert!(HighlightEstimate::parse("auto:poolq=1.5").is_err());
+}
