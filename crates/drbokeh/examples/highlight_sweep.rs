@@ -305,10 +305,12 @@ fn oracle_gain(
     render_decomposed(preset, recovered, disparity, &cam, view)
 }
 
-/// Prototype: the default estimate with the cap `max` set per scene from the median of
-/// the regions' uncapped rim gains `k / x`: `cap = clamp(c * median, lo, hi)`; mode
-/// `c,lo,hi[,kscale]` (`kscale`: the rim constant also multiplied by
-/// `(cap / 3.5)^kscale`). Prints each scene's median with `SWEEP_SCENES`.
+/// Prototype of `auto:pool` (it lifts regions whose rim gain is below 1 to `kf` where the
+/// library keeps them at 1): the default estimate with the cap set per scene from the
+/// quantile `q` (0.5 when left out) of the regions' uncapped rim gains `k / x`:
+/// `cap = clamp(c * quantile, lo, hi)`; mode `c,lo,hi[,kscale[,q]]` (`kscale`: the rim
+/// constant also multiplied by `(cap / default max)^kscale`). Prints each scene's
+/// quantiles with `SWEEP_SCENES`.
 fn scene_pooled(
     mode: &str,
     dir: &std::path::Path,
@@ -353,9 +355,8 @@ fn scene_pooled(
             .unwrap_or(1.0)
     };
     let quant = v.get(4).copied().unwrap_or(0.5);
-    let med = q(quant);
-    let cap = (c * med).clamp(lo, hi);
-    let kf = (cap / 3.5).powf(kscale);
+    let cap = (c * q(quant)).clamp(lo, hi);
+    let kf = (cap / drbokeh::highlight::HighlightEstimate::DEFAULT.max_gain).powf(kscale);
     if std::env::var_os("SWEEP_SCENES").is_some() {
         println!(
             "{} regions {} q50 {:.2} q75 {:.2} q90 {:.2} cap {cap:.2}",

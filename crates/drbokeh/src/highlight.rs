@@ -166,8 +166,12 @@ impl HighlightRecovery {
         }
         let a_point = point_area_px(w, h);
         let gain = self.gain;
+        let value = largest_channel(rgb_encoded);
+        let regions = clipped_regions(w, h, &value, self.threshold);
         recover_regions(
             rgb_encoded,
+            &value,
+            &regions,
             disparity,
             focus_disparity,
             blur_k,
@@ -175,7 +179,7 @@ impl HighlightRecovery {
             self.threshold,
             &Profile::FLAT,
             &mut out,
-            |region, _value| {
+            |_, region| {
                 let weight = (a_point / region.len() as f64).min(1.0);
                 (1.0 + (gain - 1.0) * weight, None)
             },
@@ -253,13 +257,16 @@ pub(crate) fn clipped_regions(w: usize, h: usize, value: &[f64], t0: f64) -> Vec
     out
 }
 
-/// Finds the clipped regions of `rgb_encoded` (threshold `t0`) and scales each pixel's
-/// linear colour by `g` (tint `None`) or towards `g tint` (per channel, never below the
-/// photo's), with `(g, tint)` from `gain_of(region, value)`, ramped by `s(t)` and the
-/// defocus gate; writes `out`.
+/// Scales each pixel of the clipped `regions` of `rgb_encoded` (from [`clipped_regions`]
+/// at threshold `t0` over `value`, its [`largest_channel`]) in linear light by `g` (tint
+/// `None`) or towards `g tint` (per channel, never below the photo's), with `(g, tint)`
+/// from `gain_of(index of the region, region)`, ramped by `s(t)` and the defocus gate;
+/// writes `out`.
 #[allow(clippy::too_many_arguments)]
 fn recover_regions<T: Real>(
     rgb_encoded: &Image<T>,
+    value: &[f64],
+    regions: &[Vec<usize>],
     disparity: &Image<T>,
     focus_disparity: f64,
     blur_k: f64,
@@ -267,16 +274,15 @@ fn recover_regions<T: Real>(
     t0: f64,
     profile: &Profile,
     out: &mut Image<T>,
-    mut gain_of: impl FnMut(&[usize], &[f64]) -> (f64, Option<[f64; 3]>),
+    mut gain_of: impl FnMut(usize, &[usize]) -> (f64, Option<[f64; 3]>),
 ) {
     let (w, h) = (rgb_encoded.width, rgb_encoded.height);
-    let value = largest_channel(rgb_encoded);
-    for region in clipped_regions(w, h, &value, t0) {
-        let (g_region, tint) = gain_of(&region, &value);
+    for (n, region) in regions.iter().enumerate() {
+        let (g_region, tint) = gain_of(n, region);
         let clipped = |j: usize| value[j] >= CLIPPED_LEVEL;
         let radius_of = |j: usize| blur_k * (disparity.data[j].f64() - focus_disparity).abs();
-        let sources = SourceRadii::new(&region, clipped, |j| disparity.data[j].f64(), radius_of);
-        for &i in &region {
+        let sources = SourceRadii::new(region, clipped, |j| disparity.data[j].f64(), radius_of);
+        for &i in region {
             let (x, y) = (i % w, i / w);
             let on_edge = clipped(i)
                 && (x == 0

@@ -193,26 +193,14 @@ impl HighlightEstimate {
     }
 
     /// The rim constant and cap for one image: `(rim_k, max_gain)`, or under pooling the
-    /// values read from all its clipped regions' uncapped rim gains (see `pool`).
-    fn pooled<T: Real>(
-        &self,
-        rgb_encoded: &Image<T>,
-        lin: &LinearPhoto<'_, T>,
-        mark: &mut [u32],
-        stamp: &mut u32,
-    ) -> (f64, f64) {
+    /// values read from the rim cues `x` of all its clipped regions (see `pool`).
+    fn pooled(&self, cues: impl Iterator<Item = f64>) -> (f64, f64) {
         if self.pool <= 0.0 {
             return (self.rim_k, self.max_gain);
         }
-        let (w, h) = (rgb_encoded.width, rgb_encoded.height);
-        let value = largest_channel(rgb_encoded);
-        let mut gains: Vec<f64> = clipped_regions(w, h, &value, self.threshold)
-            .iter()
-            .map(|region| {
-                *stamp += 5;
-                let (x, _) = self.cue_and_tint(region, &value, lin, w, h, mark, *stamp);
-                (self.rim_k / x.max(1e-6)).clamp(1.0, 1000.0)
-            })
+        // The regions' uncapped rim gains.
+        let mut gains: Vec<f64> = cues
+            .map(|x| (self.rim_k / x.max(1e-6)).clamp(1.0, 1000.0))
             .collect();
         if gains.is_empty() {
             return (self.rim_k, self.max_gain);
@@ -267,12 +255,24 @@ impl HighlightEstimate {
             encoded: &rgb_encoded.data,
             tone,
         };
-        let est = *self;
+        // Each region's rim cue and tint, read once; then the image's rim constant and
+        // cap (pooled over the cues, or the fixed ones).
+        let value = largest_channel(rgb_encoded);
+        let regions = clipped_regions(w, h, &value, self.threshold);
         let mut mark = vec![0u32; w * h];
         let mut stamp = 1u32;
-        let (rim_k, max_gain) = self.pooled(rgb_encoded, &lin, &mut mark, &mut stamp);
+        let cues: Vec<(f64, [f64; 3])> = regions
+            .iter()
+            .map(|region| {
+                stamp += 5;
+                self.cue_and_tint(region, &value, &lin, w, h, &mut mark, stamp)
+            })
+            .collect();
+        let (rim_k, max_gain) = self.pooled(cues.iter().map(|&(x, _)| x));
         recover_regions(
             rgb_encoded,
+            &value,
+            &regions,
             disparity,
             focus_disparity,
             blur_k,
@@ -285,9 +285,8 @@ impl HighlightEstimate {
                 edge_power: self.edge_power,
             },
             &mut out,
-            |region, value| {
-                stamp += 5;
-                let (x, tint) = est.cue_and_tint(region, value, &lin, w, h, &mut mark, stamp);
+            |n, region| {
+                let (x, tint) = cues[n];
                 let g = (rim_k / x.max(1e-6)).clamp(1.0, max_gain);
                 let (g, tint) = adjust(region, g, tint);
                 (g, Some(tint))
@@ -337,12 +336,7 @@ impl HighlightEstimate {
                 }
             }
         }
-        let mut bg = [0.0; 3];
-        for (c, b) in bg.iter_mut().enumerate() {
-            let mut v: Vec<f64> = ring.iter().map(|&j| lin.at(3 * j + c)).collect();
-            v.sort_by(f64::total_cmp);
-            *b = v.get(v.len() / 2).copied().unwrap_or(0.0);
-        }
+        let bg = lin.channel_medians(&ring, [0.0; 3]);
         for &i in region {
             if value[i] >= CLIPPED_LEVEL {
                 mark[i] = clip_m;
@@ -393,12 +387,7 @@ impl HighlightEstimate {
                 }
             }
         }
-        let mut bg_next = [0.0; 3];
-        for (c, b) in bg_next.iter_mut().enumerate() {
-            let mut v: Vec<f64> = next.iter().map(|&j| lin.at(3 * j + c)).collect();
-            v.sort_by(f64::total_cmp);
-            *b = v.get(v.len() / 2).copied().unwrap_or(bg[c]);
-        }
+        let bg_next = lin.channel_medians(&next, bg);
         let lift_of = |j: usize, c: usize| (lin.at(3 * j + c) - bg_next[c]).max(0.0);
         let lifts: Vec<f64> = rim_seen
             .iter()
@@ -451,5 +440,19 @@ impl<T: Real> LinearPhoto<'_, T> {
     #[inline]
     fn at(&self, k: usize) -> f64 {
         self.tone.linearize(self.encoded[k].f64().max(0.0))
+    }
+
+    /// The per-channel median (the upper one of an even count) of the linear values of
+    /// `pixels`; `empty` where there are none.
+    fn channel_medians(&self, pixels: &[usize], empty: [f64; 3]) -> [f64; 3] {
+        let mut m = empty;
+        for (c, mc) in m.iter_mut().enumerate() {
+            let mut v: Vec<f64> = pixels.iter().map(|&j| self.at(3 * j + c)).collect();
+            v.sort_by(f64::total_cmp);
+            if let Some(&mid) = v.get(v.len() / 2) {
+                *mc = mid;
+            }
+        }
+        m
     }
 }
