@@ -318,12 +318,13 @@ fn photo_highlights_apply_to_photos_only() {
     assert!(s.settings.camera.highlight);
     {
         // The defocused clipped 2x2 blob (all edge pixels, a rim at the background: the
-        // largest gain `max`, on edge pixels `max^edgep`) is recovered; the rest is kept.
+        // photo's only rim says "far over white", so pooling lifts the cap to `poolmax`,
+        // on edge pixels `poolmax^edgep`) is recovered; the rest is kept.
         let got = &s.stack.layers[0].rgb_encoded;
         let tone = view(PhotoHighlights::Off).tone();
         let lin = tone.linearize(got.data[3 * (5 * w + 3)] as f64);
         let d = drbokeh::highlight::HighlightEstimate::DEFAULT;
-        let want = d.max_gain.powf(d.edge_power.unwrap());
+        let want = d.pool_max.powf(d.edge_power.unwrap());
         assert!((lin - want).abs() < 1e-4, "{lin} vs {want}");
         assert!(lin > 2.0, "{lin}");
         assert_eq!(got.data[0], 0.3);

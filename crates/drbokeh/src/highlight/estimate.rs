@@ -67,7 +67,7 @@ pub struct HighlightEstimate {
     /// `pool_quantile` (`S`) of all its clipped regions' uncapped rim gains `K / x`: the cap
     /// becomes `clamp(pool S, max_gain, pool_max)` and the rim constant
     /// `K (cap / max_gain)^pool_k_power`. An image whose rims look dim keeps `max_gain`
-    /// and `K`. 0: off.
+    /// and `K`. 0: off; the default is 0.9.
     pub pool: f64,
     /// The quantile of the regions' rim gains that `pool` scales, in [0, 1].
     pub pool_quantile: f64,
@@ -79,7 +79,8 @@ pub struct HighlightEstimate {
 
 impl HighlightEstimate {
     /// The defaults of `auto` (and of photos), chosen on the tuning benchmarks of
-    /// docs/highlights.md (seeds 101 and 102, highlights 2-10 and 5-50).
+    /// docs/highlights.md (seeds 101, 102 and 103, highlights 2-10 and 5-50); `pool` 0.9
+    /// since session 36 (`auto:pool=0` gives the earlier default).
     pub const DEFAULT: HighlightEstimate = HighlightEstimate {
         rim_k: 0.2,
         max_gain: 3.5,
@@ -93,7 +94,7 @@ impl HighlightEstimate {
         edge_power: Some(0.65),
         ring_cue: true,
         tint_weighted: true,
-        pool: 0.0,
+        pool: 0.9,
         pool_quantile: 0.9,
         pool_max: 10.0,
         pool_k_power: 1.0,

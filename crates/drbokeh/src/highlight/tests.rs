@@ -132,6 +132,8 @@ fn estimate_reads_gain_and_tint_from_the_rim() {
         edge_power: None,
         ring_cue: false,
         tint_weighted: false,
+        // The per-region rule (pooling over the image is tested below).
+        pool: 0.0,
         ..HighlightEstimate::DEFAULT
     };
     let out = est.apply(&img, &disp, 0.0, 30.0, &tone).unwrap();
@@ -246,6 +248,7 @@ fn ring_cue_reads_the_rim_against_the_next_ring() {
     disp.data.iter_mut().for_each(|v| *v = 1.0);
     let ring = HighlightEstimate {
         tint: false,
+        pool: 0.0,
         ..HighlightEstimate::DEFAULT
     };
     let old = HighlightEstimate {
@@ -327,6 +330,7 @@ fn profile_keeps_unclipped_channels_and_the_rim() {
     let est = HighlightEstimate {
         tint: false,
         rim_k: 100.0,
+        pool: 0.0,
         ..HighlightEstimate::DEFAULT
     };
     let out = est.apply(&img, &disp, 0.0, 30.0, &tone()).unwrap();
@@ -481,11 +485,17 @@ fn pooling_raises_the_cap_where_every_rim_is_faint_and_keeps_dim_scenes() {
     };
     let mut disp = Image::<f64>::new(w, h, 1);
     disp.data.iter_mut().for_each(|v| *v = 1.0);
-    let plain = HighlightEstimate {
+    // The default pools (0.9); `pool: 0` is the rule without it.
+    let pooled = HighlightEstimate {
         tint: false,
         ..HighlightEstimate::DEFAULT
     };
-    let pooled = HighlightEstimate { pool: 0.9, ..plain };
+    assert_eq!(pooled.pool, 0.9);
+    let plain = HighlightEstimate {
+        pool: 0.0,
+        ..pooled
+    };
+    assert_eq!(HighlightEstimate::parse("auto:pool=0").unwrap().pool, 0.0);
     let centre = |e: &HighlightEstimate, img: &Image<f64>| {
         let out = e.apply(img, &disp, 0.0, 30.0, &tone()).unwrap();
         tone().linearize(out.data[3 * (16 * w + 16)])
