@@ -232,7 +232,9 @@ pub struct DfdArgs {
     // Formerly --layer (kept as a hidden alias).
     #[arg(long = "method", alias = "layer", default_value = "drbokeh", value_name = "NAME", help = crate::names::dfd_method_help())]
     pub layer: String,
-    /// Loss terms, comma-separated: l1, smooth, hssim, ssim (a single 11-window SSIM).
+    /// Loss terms, comma-separated: l1, smooth, hssim, ssim (a single 11-window SSIM),
+    /// each at its default weight (l1 0.5, smooth 20, hssim or ssim 10) or TERM=WEIGHT,
+    /// e.g. l1,smooth=2,hssim.
     #[arg(long, default_value = "l1,smooth,hssim")]
     pub losses: String,
     /// Start from this disparity map (same size; PNG/NPY/EXR/TIFF, near = 1) instead of

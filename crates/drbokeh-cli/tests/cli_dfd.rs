@@ -44,7 +44,7 @@ fn dfd_writes_disparity_log_and_preview() {
         "--method",
         "gausspsf",
         "--losses",
-        "l1,smooth",
+        "l1,smooth=2",
         "--output",
         p(&out),
         "-q",
@@ -55,6 +55,10 @@ fn dfd_writes_disparity_log_and_preview() {
     let log: serde_json::Value =
         serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap();
     assert_eq!(log["layer"], "gausspsf");
+    // A term's own weight (TERM=WEIGHT); the others off.
+    assert_eq!(log["weights"]["smoothness"], 2.0);
+    assert_eq!(log["weights"]["l1"], 0.5);
+    assert_eq!(log["weights"]["hssim"], 0.0);
     // 3 iterations at the one (full-resolution) scale.
     assert_eq!(log["scales"].as_array().unwrap().len(), 1);
     assert_eq!(log["entries"].as_array().unwrap().len(), 3);
@@ -95,6 +99,20 @@ fn dfd_rejects_bad_input() {
     let o = run(&["--defocused", p(&a), "--losses", "l2", "--output", p(&out)]);
     assert!(
         stderr(&o).contains("unknown loss term 'l2'"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&[
+        "--defocused",
+        p(&a),
+        "--losses",
+        "l1,smooth=-1",
+        "--output",
+        p(&out),
+    ]);
+    assert_ne!(o.status.code(), Some(0));
+    assert!(
+        stderr(&o).contains("the weight of 'smooth'") && stderr(&o).contains("-1"),
         "{}",
         stderr(&o)
     );

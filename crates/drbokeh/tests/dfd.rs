@@ -528,3 +528,28 @@ fn second_sweep_pass_keeps_a_near_edge_from_spreading() {
         "two passes: ring MAE {two_passes} (one pass {one_pass})"
     );
 }
+
+#[test]
+fn loss_terms_take_their_defaults_or_a_given_weight() {
+    use drbokeh::dfd::{LossTerms, LossWeights};
+    let (w, t) = LossWeights::from_terms("l1,smooth,hssim").unwrap();
+    assert_eq!((w, t), (LossWeights::DEFAULT, LossTerms::Hssim));
+    let (w, _) = LossWeights::from_terms("l1, smooth=2 ,hssim=4").unwrap();
+    assert_eq!((w.l1, w.smoothness, w.hssim), (0.5, 2.0, 4.0));
+    let (w, t) = LossWeights::from_terms("l1=1,ssim=3").unwrap();
+    assert_eq!(
+        (w.l1, w.smoothness, w.hssim, t),
+        (1.0, 0.0, 3.0, LossTerms::SingleSsim)
+    );
+    for bad in [
+        "l1,smooth=-1",
+        "smooth=nan",
+        "l1=",
+        "hssim=x",
+        "blur=2",
+        "l1=0",
+    ] {
+        let e = LossWeights::from_terms(bad).unwrap_err().to_string();
+        assert!(e.contains("losses"), "{bad}: {e}");
+    }
+}

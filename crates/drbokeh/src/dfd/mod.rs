@@ -81,7 +81,9 @@ impl LossWeights {
     };
 
     /// Keeps the default weights for the named terms (`l1`, `smooth`, `ssim`, `hssim`; see
-    /// [`LossTerms`]) and zeroes the others.
+    /// [`LossTerms`]) and zeroes the others. A term may carry its own weight, `TERM=W`
+    /// (finite, >= 0), e.g. `l1,smooth=2,hssim` (docs/dfd.md: five layers with smoothness
+    /// 2 was the best held-out setting of session 34).
     pub fn from_terms(terms: &str) -> Result<(Self, LossTerms)> {
         let mut w = LossWeights {
             l1: 0.0,
@@ -90,19 +92,42 @@ impl LossWeights {
         };
         let mut single_ssim = false;
         for t in terms.split(',').map(str::trim) {
-            match t {
-                "l1" => w.l1 = Self::DEFAULT.l1,
-                "smooth" | "smoothness" | "g" => w.smoothness = Self::DEFAULT.smoothness,
-                "hssim" => w.hssim = Self::DEFAULT.hssim,
+            let (name, weight) = match t.split_once('=') {
+                Some((name, v)) => {
+                    let v: f64 = v
+                        .trim()
+                        .parse()
+                        .ok()
+                        .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+                        .ok_or_else(|| {
+                            Error::param(
+                                "losses",
+                                format!(
+                                    "the weight of '{}' must be a finite number >= 0, got '{}'",
+                                    name.trim(),
+                                    v.trim()
+                                ),
+                            )
+                        })?;
+                    (name.trim(), Some(v))
+                }
+                None => (t, None),
+            };
+            match name {
+                "l1" => w.l1 = weight.unwrap_or(Self::DEFAULT.l1),
+                "smooth" | "smoothness" | "g" => {
+                    w.smoothness = weight.unwrap_or(Self::DEFAULT.smoothness)
+                }
+                "hssim" => w.hssim = weight.unwrap_or(Self::DEFAULT.hssim),
                 "ssim" => {
                     // A single 11-window SSIM with the same total weight as HSSIM's five.
-                    w.hssim = Self::DEFAULT.hssim;
+                    w.hssim = weight.unwrap_or(Self::DEFAULT.hssim);
                     single_ssim = true;
                 }
                 _ => {
                     return Err(Error::param(
                         "losses",
-                        format!("unknown loss term '{t}' (use l1, smooth, ssim, hssim)"),
+                        format!("unknown loss term '{name}' (use l1, smooth, ssim, hssim, each optionally TERM=WEIGHT)"),
                     ))
                 }
             }
