@@ -94,22 +94,17 @@ impl LossWeights {
         for t in terms.split(',').map(str::trim) {
             let (name, weight) = match t.split_once('=') {
                 Some((name, v)) => {
-                    let v: f64 = v
-                        .trim()
-                        .parse()
-                        .ok()
-                        .filter(|v: &f64| v.is_finite() && *v >= 0.0)
-                        .ok_or_else(|| {
-                            Error::param(
-                                "losses",
-                                format!(
-                                    "the weight of '{}' must be a finite number >= 0, got '{}'",
-                                    name.trim(),
-                                    v.trim()
-                                ),
-                            )
-                        })?;
-                    (name.trim(), Some(v))
+                    let (name, v) = (name.trim(), v.trim());
+                    let weight = v.parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0);
+                    let weight = weight.ok_or_else(|| {
+                        Error::param(
+                            "losses",
+                            format!(
+                                "the weight of '{name}' must be a finite number >= 0, got '{v}'"
+                            ),
+                        )
+                    })?;
+                    (name, Some(weight))
                 }
                 None => (t, None),
             };

@@ -200,9 +200,7 @@ impl HighlightEstimate {
             return (self.rim_k, self.max_gain);
         }
         // The regions' uncapped rim gains.
-        let mut gains: Vec<f64> = cues
-            .map(|x| (self.rim_k / x.max(1e-6)).clamp(1.0, 1000.0))
-            .collect();
+        let mut gains: Vec<f64> = cues.map(|x| rim_gain(self.rim_k, x, 1000.0)).collect();
         if gains.is_empty() {
             return (self.rim_k, self.max_gain);
         }
@@ -288,7 +286,7 @@ impl HighlightEstimate {
             &mut out,
             |n, region| {
                 let (x, tint) = cues[n];
-                let g = (rim_k / x.max(1e-6)).clamp(1.0, max_gain);
+                let g = rim_gain(rim_k, x, max_gain);
                 let (g, tint) = adjust(region, g, tint);
                 (g, Some(tint))
             },
@@ -426,6 +424,12 @@ impl HighlightEstimate {
         };
         (x, tint)
     }
+}
+
+/// A region's gain from its rim cue `x` (docs/highlights.md, recovery step 1):
+/// `g = clamp(K / x, 1, cap)`.
+fn rim_gain(rim_k: f64, x: f64, cap: f64) -> f64 {
+    (rim_k / x.max(1e-6)).clamp(1.0, cap)
 }
 
 /// The photo's linear values, computed where they are read: the estimate reads the few
