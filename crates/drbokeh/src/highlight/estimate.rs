@@ -75,6 +75,11 @@ pub struct HighlightEstimate {
     pub pool_max: f64,
     /// Power of `cap / max_gain` on the rim constant under pooling (>= 0).
     pub pool_k_power: f64,
+    /// Whether a region in which some channel did not clip at any of its clipped pixels
+    /// gets no gain of its own (docs/highlights.md, "A channel that did not clip"): its
+    /// source is at most `1 / t` times white in the other channels (`t` that channel's
+    /// share of the tint), little enough that the paper's boost alone covers it.
+    pub unclipped_channel: bool,
 }
 
 impl HighlightEstimate {
@@ -98,19 +103,21 @@ impl HighlightEstimate {
         pool_quantile: 0.9,
         pool_max: 10.0,
         pool_k_power: 1.0,
+        unclipped_channel: true,
     };
 
     /// Parses `auto` or `auto:KEY=VALUE,...` with keys `k` (rim constant), `max` (largest
     /// gain), `t` (threshold), `edgep` (power of the gain on the clipped edge pixels),
     /// `edge` (share of `g - 1` on them instead), `white`, `tint`, `paper`, `keep`, `cue`,
     /// `tintw` (0 or 1), `rim` (share of the ramp on bright unclipped pixels), and `pool`,
-    /// `poolq`, `poolmax`, `poolk` (one exposure per photo, [`HighlightEstimate::pool`]).
+    /// `poolq`, `poolmax`, `poolk` (one exposure per photo, [`HighlightEstimate::pool`]),
+    /// `chan` (0 or 1, [`HighlightEstimate::unclipped_channel`]).
     pub fn parse(spec: &str) -> Result<Self> {
         let bad = || {
             Error::param(
                 "highlight",
                 format!(
-                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edgep, edge, white, tint, paper, keep, cue, tintw, rim, pool, poolq, poolmax, poolk; e.g. auto:k=0.3,max=8 or auto:pool=0.9), got '{spec}'"
+                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edgep, edge, white, tint, paper, keep, cue, tintw, rim, pool, poolq, poolmax, poolk, chan; e.g. auto:k=0.3,max=8 or auto:pool=0.9), got '{spec}'"
                 ),
             )
         };
@@ -143,6 +150,7 @@ impl HighlightEstimate {
                 "poolq" => e.pool_quantile = v,
                 "poolmax" => e.pool_max = v,
                 "poolk" => e.pool_k_power = v,
+                "chan" if v == 0.0 || v == 1.0 => e.unclipped_channel = v == 1.0,
                 _ => return Err(bad()),
             }
         }
@@ -260,14 +268,14 @@ impl HighlightEstimate {
         let regions = clipped_regions(w, h, &value, self.threshold);
         let mut mark = vec![0u32; w * h];
         let mut stamp = 1u32;
-        let cues: Vec<(f64, [f64; 3])> = regions
+        let cues: Vec<RegionCue> = regions
             .iter()
             .map(|region| {
                 stamp += 5;
                 self.cue_and_tint(region, &value, &lin, w, h, &mut mark, stamp)
             })
             .collect();
-        let (rim_k, max_gain) = self.pooled(cues.iter().map(|&(x, _)| x));
+        let (rim_k, max_gain) = self.pooled(cues.iter().map(|cue| cue.rim));
         recover_regions(
             rgb_encoded,
             &value,
@@ -285,17 +293,21 @@ impl HighlightEstimate {
             },
             &mut out,
             |n, region| {
-                let (x, tint) = cues[n];
-                let g = rim_gain(rim_k, x, max_gain);
-                let (g, tint) = adjust(region, g, tint);
+                let cue = &cues[n];
+                let g = if self.unclipped_channel && cue.channel_unclipped {
+                    1.0
+                } else {
+                    rim_gain(rim_k, cue.rim, max_gain)
+                };
+                let (g, tint) = adjust(region, g, cue.tint);
                 (g, Some(tint))
             },
         );
         Ok(out)
     }
 
-    /// (rim cue `x`, tint) of one region; `mark` is scratch, values `stamp..stamp + 4`
-    /// unused before this call.
+    /// The rim cue, tint and unclipped channel of one region; `mark` is scratch, values
+    /// `stamp..stamp + 4` unused before this call.
     #[allow(clippy::too_many_arguments)]
     fn cue_and_tint<T: Real>(
         &self,
@@ -306,7 +318,7 @@ impl HighlightEstimate {
         h: usize,
         mark: &mut [u32],
         stamp: u32,
-    ) -> (f64, [f64; 3]) {
+    ) -> RegionCue {
         let (far_m, near_m, clip_m, rim_m, next_m) =
             (stamp, stamp + 1, stamp + 2, stamp + 3, stamp + 4);
         let around = |i: usize, r: usize| {
@@ -422,8 +434,29 @@ impl HighlightEstimate {
         } else {
             [1.0; 3]
         };
-        (x, tint)
+        // A channel that none of the clipped pixels clipped (a warm light clipped in red
+        // and green only).
+        let channel_unclipped = (0..3).any(|c| {
+            clipped
+                .iter()
+                .all(|&i| lin.encoded[3 * i + c].f64() < CLIPPED_LEVEL)
+        });
+        RegionCue {
+            rim: x,
+            tint,
+            channel_unclipped: !clipped.is_empty() && channel_unclipped,
+        }
     }
+}
+
+/// What the estimate reads from one clipped region.
+struct RegionCue {
+    /// The rim cue `x` (light per rim pixel above the local background).
+    rim: f64,
+    /// The source's tint read from the rim (largest channel 1).
+    tint: [f64; 3],
+    /// Whether some channel did not clip at any of the region's clipped pixels.
+    channel_unclipped: bool,
 }
 
 /// A region's gain from its rim cue `x` (docs/highlights.md, recovery step 1):

@@ -520,3 +520,46 @@ fn pooling_raises_the_cap_where_every_rim_is_faint_and_keeps_dim_scenes() {
     assert!(HighlightEstimate::parse("auto:pool=0.9,poolmax=2").is_err());
     assert!(HighlightEstimate::parse("auto:poolq=1.5").is_err());
 }
+
+#[test]
+fn a_region_whose_clipped_pixels_leave_a_channel_unclipped_gets_no_gain() {
+    // A warm 4x4 blob clipped in red and green, its blue (0.45) below white at every
+    // pixel, with no rim light (the rim cue alone would give the largest gain): its
+    // source is at most 1 / 0.45 times white, and it keeps the photo's light (the paper's
+    // boost in the model is all it gets). With its blue clipped at one pixel, or with
+    // `chan=0`, the rim's gain applies.
+    let (w, h) = (20, 20);
+    let blob = |blue_clipped_at_one: bool| {
+        let mut lin = vec![0.05; w * h * 3];
+        for y in 8..12 {
+            for x in 8..12 {
+                lin[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&[1.0, 1.0, 0.45]);
+            }
+        }
+        if blue_clipped_at_one {
+            lin[3 * (10 * w + 10) + 2] = 1.0;
+        }
+        encode_lin(&lin, w, h)
+    };
+    let mut disp = Image::<f64>::new(w, h, 1);
+    disp.data.iter_mut().for_each(|v| *v = 1.0);
+    let est = HighlightEstimate {
+        rim_k: 100.0,
+        pool: 0.0,
+        ..HighlightEstimate::DEFAULT
+    };
+    assert!(est.unclipped_channel, "on by default");
+    let red_at_centre = |e: &HighlightEstimate, img: &Image<f64>| {
+        let out = e.apply(img, &disp, 0.0, 30.0, &tone()).unwrap();
+        tone().linearize(out.data[3 * (9 * w + 9)])
+    };
+    let warm = blob(false);
+    let out = est.apply(&warm, &disp, 0.0, 30.0, &tone()).unwrap();
+    assert_eq!(out, warm, "no gain: the photo as it is");
+    let off = HighlightEstimate::parse("auto:chan=0,pool=0,k=100").unwrap();
+    assert!(!off.unclipped_channel);
+    assert!((red_at_centre(&off, &warm) - off.max_gain).abs() < 1e-9);
+    let g = red_at_centre(&est, &blob(true));
+    assert!((g - est.max_gain).abs() < 1e-9, "{g}");
+    assert!(HighlightEstimate::parse("auto:chan=2").is_err());
+}
