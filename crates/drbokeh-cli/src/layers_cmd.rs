@@ -64,7 +64,7 @@ pub struct LayersArgs {
     pub band: Option<f64>,
 
     /// Make the stack for a render at this focus disparity (with --blur): cuts where the
-    /// nearer side would not be blurred more than the farther one are left out, as
+    /// nearer side would be less blurred than the farther one are left out, as
     /// `drbokeh render --image` does.
     #[arg(long, value_name = "F", requires = "blur", value_parser = crate::values::focus)]
     pub focus: Option<f64>,
