@@ -132,8 +132,9 @@ fn focus_hint_keeps_only_cuts_that_can_change_the_render() {
     assert_eq!(d.stack.layers.len(), 1);
     assert_eq!(d.stack.layers[0].rgb_encoded, rgb);
     assert!(d.notes[0].contains("focus and blur"), "{:?}", d.notes);
-    // A small blur (under half a pixel between the planes): the nearer side is still the more blurred,
-    // so the default keeps the cut; a margin of 1 px (`min_blur_gain_px`) drops it.
+    // A small blur (under half a pixel between the planes): the nearer side is still the
+    // more blurred, so the default keeps the cut; a margin of 1 px (`min_blur_gain_px`)
+    // drops it, and the note names the margin.
     let d = with(0.0, 0.5);
     assert_eq!(d.stack.layers.len(), 2);
     let margin = LayeringOptions {
@@ -144,6 +145,11 @@ fn focus_hint_keeps_only_cuts_that_can_change_the_render() {
     let d = layers_from_disparity(&rgb, &disp, &margin).unwrap();
     assert_eq!(d.stack.layers.len(), 1);
     assert!(d.notes[0].contains("focus and blur"), "{:?}", d.notes);
+    assert!(
+        d.notes[0].contains("at least 1 px more than"),
+        "{:?}",
+        d.notes
+    );
     // The three-plane scene focused on the middle plane keeps the front cut only.
     let (w, h) = (60, 40);
     let mut rgb = Image::<f32>::new(w, h, 3);

@@ -413,7 +413,12 @@ pub fn layers_from_disparity<T: Real>(
         let why = if opts.max_layers == 1 {
             "at most one layer was asked for (max_layers = 1)".to_string()
         } else if dropped > 0 {
-            "at this focus and blur, no depth edge has its nearer side blurred at least as much as the farther one (layers would not change the render)".to_string()
+            let by = if opts.min_blur_gain_px > 0.0 {
+                format!("{} px more than", opts.min_blur_gain_px)
+            } else {
+                "as much as".to_string()
+            };
+            format!("at this focus and blur, no depth edge has its nearer side blurred at least {by} the farther one (layers would not change the render)")
         } else if hi - lo <= 0.0 {
             "the disparity map is constant".to_string()
         } else {
