@@ -102,8 +102,9 @@ pub struct CameraArgs {
     /// Bright, defocused highlights (brighter bokeh balls; docs/highlights.md): `auto`
     /// (each clipped region of a photo recovered in linear light with a gain and tint
     /// estimated from its rim, its cap set from all the photo's regions together, no gain
-    /// where a channel did not clip, plus the paper's boost; the default for photos;
-    /// auto:pool=0 without that pooling, auto:chan=0 with a gain there too), `paper`
+    /// where a channel did not clip, plus a boost of the pixels above 0.9 by up to 1.25;
+    /// the default for photos; auto:pool=0 without that pooling, auto:chan=0 with a gain
+    /// there too, auto:paper=1 with the paper's boost on top instead), `paper`
     /// (the paper's 1 + 0.2 m boost; plain --highlight), `off`, or GAIN[:THRESHOLD] (one
     /// gain for every clipped region, e.g. 2:0.95). Without the flag: `auto` for --image,
     /// off for stacks and the demo.

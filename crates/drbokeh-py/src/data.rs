@@ -195,7 +195,7 @@ fn camera_dict<'py>(py: Python<'py>, cam: &drbokeh::Camera) -> PyResult<Bound<'p
     c.set_item("window", cam.window.size())?;
     c.set_item("gamma", cam.gamma)?;
     c.set_item("offset", cam.offset)?;
-    c.set_item("highlight", cam.highlight)?;
+    c.set_item("highlight", cam.highlight.is_some())?;
     Ok(c)
 }
 

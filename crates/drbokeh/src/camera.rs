@@ -2,6 +2,7 @@
 //! `focus_disparity` is a normalised disparity, `blur_k` is pixels of blur radius per unit
 //! of relative disparity, window sizes are in pixels.
 
+use crate::model::HighlightBoost;
 use crate::{Error, Result};
 
 /// The largest window size `L` accepted (a guard: the reference cost grows with `L^2`).
@@ -107,8 +108,9 @@ pub struct Camera {
     pub gamma: f64,
     /// Offset of the display encoding.
     pub offset: f64,
-    /// Whether to apply the highlight boost before linearisation.
-    pub highlight: bool,
+    /// The highlight boost before linearisation, if on (docs/model.md, M20;
+    /// [`HighlightBoost::PAPER`] is the paper's).
+    pub highlight: Option<HighlightBoost>,
 }
 
 impl Camera {
@@ -121,7 +123,7 @@ impl Camera {
             window: Window::from_size(71).unwrap(),
             gamma: 2.2,
             offset: 0.0,
-            highlight: false,
+            highlight: None,
         }
     }
 
@@ -151,6 +153,9 @@ impl Camera {
                 "offset",
                 format!("offset must be in [0, 1], got {}", self.offset),
             ));
+        }
+        if let Some(boost) = &self.highlight {
+            boost.validate()?;
         }
         Ok(())
     }

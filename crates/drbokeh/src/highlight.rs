@@ -30,7 +30,7 @@
 //! the photo: its colour values are not differentiated through it.
 
 use crate::image::Image;
-use crate::model::Tone;
+use crate::model::{HighlightBoost, Tone};
 use crate::{Error, Real, Result};
 
 mod depth;
@@ -55,7 +55,8 @@ pub enum PhotoHighlights {
     /// Per-region recovery (this module).
     Recover(HighlightRecovery),
     /// Per-region recovery with each region's gain and tint estimated from its rim
-    /// ([`HighlightEstimate`]), then the paper's boost: the default
+    /// ([`HighlightEstimate`]), then the highlight boost with its photo constants
+    /// ([`HighlightBoost::PHOTO`]): the default
     /// ([`HighlightEstimate::DEFAULT`]), the best of the settings measured in
     /// docs/highlights.md over both highlight ranges.
     Estimate(HighlightEstimate),
@@ -80,12 +81,14 @@ impl PhotoHighlights {
         })
     }
 
-    /// Whether the paper's boost (docs/model.md, M20) is on for a photo.
-    pub fn paper_boost(&self) -> bool {
+    /// The highlight boost (docs/model.md, M20) in the model for a photo, if any: the
+    /// paper's for `paper`, the estimate's own (by default [`HighlightBoost::PHOTO`]) for
+    /// `auto`.
+    pub fn boost(&self) -> Option<HighlightBoost> {
         match self {
-            PhotoHighlights::PaperBoost => true,
-            PhotoHighlights::Estimate(e) => e.paper,
-            PhotoHighlights::Off | PhotoHighlights::Recover(_) => false,
+            PhotoHighlights::PaperBoost => Some(HighlightBoost::PAPER),
+            PhotoHighlights::Estimate(e) => e.boost,
+            PhotoHighlights::Off | PhotoHighlights::Recover(_) => None,
         }
     }
 }

@@ -45,6 +45,7 @@ pub use engine::{
 };
 pub use error::{Error, Result};
 pub use image::Image;
+pub use model::HighlightBoost;
 pub use presets::{Preset, RenderSettings};
 pub use progress::{NoProgress, Progress};
 pub use real::Real;

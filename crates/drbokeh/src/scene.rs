@@ -26,9 +26,10 @@
 //!   [`crate::layering::layers_from_disparity`]); with a matte, the paper's two layers; or
 //!   one opaque layer on request ([`Layering::SingleLayer`]). Linear (EXR) colour is
 //!   display-encoded with the transfer the renderer will undo ([`read_display_image`]).
-//! - **Highlights.** A display-encoded photo's clipped highlights get the paper's boost by
-//!   default, or a per-region recovery before the decomposition
-//!   ([`View::photo_highlights`], docs/highlights.md).
+//! - **Highlights.** A display-encoded photo's clipped highlights are recovered before the
+//!   decomposition by default (each clipped region's gain and tint read from its rim), and
+//!   the model's highlight boost is applied on top with its photo constants
+//!   ([`View::photo_highlights`], [`crate::model::HighlightBoost::PHOTO`], docs/highlights.md).
 //!
 //! - **Budget.** The work a source implies (demo size, or the image's size from its header
 //!   times the layers its decomposition may make) is checked against the input budget
@@ -50,7 +51,7 @@ use crate::highlight::PhotoHighlights;
 use crate::image::{check_dimensions, Image};
 use crate::io::{self, DepthKind, DisparityOptions};
 use crate::layering::{self, LayeringOptions};
-use crate::model::{self, Tone};
+use crate::model::{self, HighlightBoost, Tone};
 use crate::presets::{Preset, RenderSettings};
 use crate::stack::{Layer, LayerStack};
 use crate::{Error, Real, Result};
@@ -175,8 +176,9 @@ pub struct View {
     /// The paper's highlight boost inside the model (docs/model.md, M20).
     pub highlight: bool,
     /// How a display-encoded photo's clipped highlights are treated ([`PhotoHighlights`],
-    /// docs/highlights.md): not at all, the paper's boost (the default), or recovery before
-    /// the photo becomes layers. Not applied to stacks, the demo or linear (EXR) images.
+    /// docs/highlights.md): not at all, the paper's boost, or recovery before the photo
+    /// becomes layers (the default: the rim estimate, then the boost with its photo
+    /// constants). Not applied to stacks, the demo or linear (EXR) images.
     pub photo_highlights: PhotoHighlights,
     /// Aperture shape ([`parse_aperture`] reads the textual form).
     pub aperture: Aperture,
@@ -186,7 +188,7 @@ pub struct View {
 
 impl Default for View {
     /// Automatic focus and window, K = 30, gamma 2.2, offset 0, no highlight boost
-    /// except for photos ([`PhotoHighlights::default`]: the paper's boost), a circular
+    /// except for photos ([`PhotoHighlights::default`]: recovery, then the boost), a circular
     /// aperture and the `physical` preset (the CLI's and the Python module's defaults).
     fn default() -> Self {
         let cam = Camera::paper_default(0.5);
@@ -196,7 +198,7 @@ impl Default for View {
             window: None,
             gamma: cam.gamma,
             offset: cam.offset,
-            highlight: cam.highlight,
+            highlight: cam.highlight.is_some(),
             photo_highlights: PhotoHighlights::default(),
             aperture: Aperture::Circle,
             preset: Preset::Physical,
@@ -284,7 +286,7 @@ impl View {
                 window,
                 gamma: self.gamma,
                 offset: self.offset,
-                highlight: self.highlight,
+                highlight: self.highlight.then_some(HighlightBoost::PAPER),
             },
             aperture: self.aperture.clone(),
             preset: self.preset,
@@ -347,8 +349,8 @@ pub fn resolve<T: Real>(source: Source<T>, view: &View, engine: Engine) -> Resul
     };
     let (mut settings, note) = view.settings_for(&stack, engine)?;
     notes.extend(note);
-    if is_photo && view.photo_highlights.paper_boost() {
-        settings.camera.highlight = true;
+    if let Some(boost) = view.photo_highlights.boost().filter(|_| is_photo) {
+        settings.camera.highlight = Some(boost);
     }
     Ok(Scene {
         stack,

@@ -5,6 +5,7 @@ mod common;
 use common::{settings, Rng};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::{Coverage, CoverageRadius, Footprint, ModelOptions, ScatterStep, Transfer};
+use drbokeh::HighlightBoost;
 use drbokeh::{
     render, render_with_tape, Aperture, Engine, Image, Layer, LayerStack, NoProgress,
     RenderSettings,
@@ -179,7 +180,7 @@ fn fd_polygon_with_highlight() {
             rotation_deg: 20.0,
         },
     );
-    s.camera.highlight = true;
+    s.camera.highlight = Some(HighlightBoost::PAPER);
     run_fd(&stack, &s, 2);
 }
 
@@ -388,7 +389,8 @@ fn fd_physical_polygon_with_highlight() {
             rotation_deg: 20.0,
         },
     ));
-    s.camera.highlight = true;
+    // The photo constants (threshold 0.9: the 0.93 values are above it).
+    s.camera.highlight = Some(HighlightBoost::PHOTO);
     run_fd(&stack, &s, 12);
 }
 

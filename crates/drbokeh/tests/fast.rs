@@ -7,6 +7,7 @@ mod common;
 use common::{random_stack, settings};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::ModelOptions;
+use drbokeh::HighlightBoost;
 use drbokeh::{render, Aperture, Engine, Image, Layer, LayerStack, NoProgress};
 
 fn max_linear_diff<A: drbokeh::Real, B: drbokeh::Real>(
@@ -91,7 +92,7 @@ fn fast_matches_reference_with_empty_regions_and_large_blur() {
 fn fast_is_identical_for_any_thread_count() {
     let stack = random_stack::<f32>(8, 90, 100, 2);
     let mut s = settings(0.3, 20.0, 31, Aperture::Circle);
-    s.camera.highlight = true;
+    s.camera.highlight = Some(HighlightBoost::PAPER);
     let run = |n: usize| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)

@@ -12,6 +12,7 @@ mod common;
 use common::{random_stack, settings, tape_bits, tape_gradients, Rng};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::ModelOptions;
+use drbokeh::HighlightBoost;
 use drbokeh::{
     render, render_with_tape, render_with_tape_on, Aperture, Engine, Gradients, Image, Layer,
     LayerStack, NoProgress, Real, RenderSettings,
@@ -146,7 +147,7 @@ fn fast_adjoint_matches_exact_paper() {
         let stack = random_stack::<f64>(3 + i as u64, 40, 33, 3);
         let mut s = settings(0.45, 10.0, 25, aperture);
         match i {
-            1 => s.camera.highlight = true,
+            1 => s.camera.highlight = Some(HighlightBoost::PAPER),
             2 => {
                 s.camera.gamma = 1.8;
                 s.camera.offset = 0.05;
@@ -162,7 +163,7 @@ fn fast_adjoint_matches_exact_physical() {
     for (i, (name, aperture)) in apertures().into_iter().enumerate() {
         let stack = random_stack::<f64>(13 + i as u64, 40, 33, 3);
         let mut s = settings(0.45, 10.0, 25, aperture).with_model(ModelOptions::PHYSICAL);
-        s.camera.highlight = i == 1;
+        s.camera.highlight = (i == 1).then_some(HighlightBoost::PAPER);
         check(&format!("physical {name}"), &stack, &s, 15 + i as u64);
     }
 }

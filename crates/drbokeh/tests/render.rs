@@ -5,6 +5,7 @@ mod common;
 
 use common::{random_stack, settings};
 use drbokeh::aperture::KernelImage;
+use drbokeh::HighlightBoost;
 use drbokeh::{
     render, Aperture, Engine, Image, Layer, LayerStack, NoProgress, RenderSettings, Window,
 };
@@ -211,7 +212,7 @@ fn highlight_boost_brightens_only_bright_defocused_pixels() {
     let stack = LayerStack::new(vec![layer]).unwrap();
     let mut s = settings(0.6, 5.0, 9, Aperture::Circle);
     let plain = render(&stack, &s, Engine::Reference, &NoProgress).unwrap();
-    s.camera.highlight = true;
+    s.camera.highlight = Some(HighlightBoost::PAPER);
     let boosted = render(&stack, &s, Engine::Reference, &NoProgress).unwrap();
     assert!(boosted.at(7, 7, 0) > plain.at(7, 7, 0) + 1e-3);
     // Dark channels are not boosted.
@@ -219,9 +220,46 @@ fn highlight_boost_brightens_only_bright_defocused_pixels() {
     // In focus, nothing is boosted.
     s.camera.focus_disparity = 0.1;
     let a = render(&stack, &s, Engine::Reference, &NoProgress).unwrap();
-    s.camera.highlight = false;
+    s.camera.highlight = None;
     let b = render(&stack, &s, Engine::Reference, &NoProgress).unwrap();
     assert!(a.max_abs_diff(&b) < 1e-12);
+}
+
+/// The photo constants (threshold 0.9, amount 0.25): a value between the paper's threshold
+/// (200/255) and 0.9 is not boosted; a recovered highlight (encoded above 1) is boosted
+/// more than with the paper's.
+#[test]
+fn photo_boost_starts_higher_and_lifts_recovered_light_more() {
+    let mut layer = Layer::<f64>::constant(15, 15, [0.2, 0.2, 0.2], 1.0, 0.1);
+    *layer.rgb_encoded.at_mut(7, 7, 0) = 1.6;
+    *layer.rgb_encoded.at_mut(7, 7, 1) = 0.85;
+    let stack = LayerStack::new(vec![layer]).unwrap();
+    let mut s = settings(0.6, 5.0, 9, Aperture::Circle);
+    let at = |s: &drbokeh::RenderSettings, c| {
+        render(&stack, s, Engine::Reference, &NoProgress)
+            .unwrap()
+            .at(7, 7, c)
+    };
+    let plain = [at(&s, 0), at(&s, 1)];
+    s.camera.highlight = Some(HighlightBoost::PAPER);
+    let paper = [at(&s, 0), at(&s, 1)];
+    s.camera.highlight = Some(HighlightBoost::PHOTO);
+    let photo = [at(&s, 0), at(&s, 1)];
+    assert!(paper[1] > plain[1] + 1e-3, "0.85 is above 200/255");
+    assert!((photo[1] - plain[1]).abs() < 1e-12, "0.85 is below 0.9");
+    assert!(photo[0] > paper[0] + 1e-3, "{photo:?} {paper:?}");
+    // Out-of-range constants are refused, naming the parameter.
+    s.camera.highlight = Some(HighlightBoost {
+        amount: f64::NAN,
+        ..HighlightBoost::PHOTO
+    });
+    let err = render(&stack, &s, Engine::Reference, &NoProgress).unwrap_err();
+    assert!(err.to_string().contains("boost amount"), "{err}");
+    s.camera.highlight = Some(HighlightBoost {
+        threshold_encoded: 1.0,
+        ..HighlightBoost::PHOTO
+    });
+    assert!(render(&stack, &s, Engine::Reference, &NoProgress).is_err());
 }
 
 /// The 5x5 two-layer case of tools/golden_paper.py, an independent plain-Python

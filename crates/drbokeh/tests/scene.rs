@@ -58,7 +58,10 @@ fn a_stack_and_a_focus_value_resolve_to_the_views_settings() {
         (cam.focus_disparity, cam.blur_k, cam.window.size()),
         (0.4, 12.0, 15)
     );
-    assert_eq!((cam.gamma, cam.offset, cam.highlight), (2.0, 0.01, true));
+    assert_eq!(
+        (cam.gamma, cam.offset, cam.highlight),
+        (2.0, 0.01, Some(drbokeh::HighlightBoost::PAPER))
+    );
     assert_eq!(s.settings.aperture, view.aperture);
     assert_eq!(s.settings.preset, Preset::Paper);
 }
@@ -304,7 +307,8 @@ fn photo_highlights_apply_to_photos_only() {
         photo_highlights,
         ..View::default()
     };
-    // Default: the rim estimate with the paper's boost for a photo, not for a stack.
+    // Default: the rim estimate with the boost's photo constants for a photo, no boost for a
+    // stack.
     assert_eq!(
         View::default().photo_highlights,
         PhotoHighlights::Estimate(drbokeh::highlight::HighlightEstimate::DEFAULT)
@@ -315,7 +319,10 @@ fn photo_highlights_apply_to_photos_only() {
         Engine::Fast,
     )
     .unwrap();
-    assert!(s.settings.camera.highlight);
+    assert_eq!(
+        s.settings.camera.highlight,
+        Some(drbokeh::HighlightBoost::PHOTO)
+    );
     {
         // The defocused clipped 2x2 blob (all edge pixels, a rim at the background: the
         // photo's only rim says "far over white", so pooling lifts the cap to `poolmax`,
@@ -336,7 +343,7 @@ fn photo_highlights_apply_to_photos_only() {
         Engine::Fast,
     )
     .unwrap();
-    assert!(!s.settings.camera.highlight);
+    assert_eq!(s.settings.camera.highlight, None);
     // Off: nothing.
     let s = scene::resolve(
         photo(Layering::SingleLayer),
@@ -344,7 +351,7 @@ fn photo_highlights_apply_to_photos_only() {
         Engine::Fast,
     )
     .unwrap();
-    assert!(!s.settings.camera.highlight);
+    assert_eq!(s.settings.camera.highlight, None);
     assert_eq!(s.stack.layers[0].rgb_encoded, rgb);
     // Recovery: the defocused clipped blob gets the gain in linear light, the rest is kept.
     let r = HighlightRecovery {
@@ -357,7 +364,7 @@ fn photo_highlights_apply_to_photos_only() {
         Engine::Fast,
     )
     .unwrap();
-    assert!(!s.settings.camera.highlight);
+    assert_eq!(s.settings.camera.highlight, None);
     let got = &s.stack.layers[0].rgb_encoded;
     let tone = view(PhotoHighlights::Off).tone();
     let lin = tone.linearize(got.data[3 * (5 * w + 3)] as f64);

@@ -124,7 +124,7 @@ pub fn render_with_camera<T: Real>(
     let radius = ((3.0 * sigma).ceil() as usize).clamp(1, MAX_WINDOW_SIZE / 2);
     let mut settings = RenderSettings::paper(camera.focus_disparity);
     settings.camera = camera.clone();
-    settings.camera.highlight = false;
+    settings.camera.highlight = None;
     settings.camera.window = Window::from_size(2 * radius + 1)?;
     render(aif, disparity, &settings)
 }

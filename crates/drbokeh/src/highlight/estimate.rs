@@ -6,7 +6,7 @@ use super::{
     CLIPPED_LEVEL,
 };
 use crate::image::Image;
-use crate::model::Tone;
+use crate::model::{HighlightBoost, Tone};
 use crate::{Error, Real, Result};
 
 /// Per-region gain and tint estimated from the region's rim: `--highlight auto` (the
@@ -28,8 +28,9 @@ use crate::{Error, Real, Result};
 /// edge are only partly covered by the source and get `g^p` (`edge_power`; or the share
 /// `edge` of `g - 1`). Channels that did not clip keep their value (`keep`), and so do the
 /// region's bright unclipped pixels (`rim_ramp` 0; else they ramp in as in
-/// [`HighlightRecovery`]). The defocus gate applies. With `paper`, the paper's boost
-/// (docs/model.md, M20) is applied on top in the model, as for `paper`.
+/// [`HighlightRecovery`]). The defocus gate applies. Then the highlight boost
+/// (docs/model.md, M20) is applied on top in the model (`boost`: by default with
+/// [`HighlightBoost::PHOTO`]'s constants).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HighlightEstimate {
     /// Rim constant `K` (> 0).
@@ -43,8 +44,10 @@ pub struct HighlightEstimate {
     /// Share of the gain `g - 1` that the region's clipped edge pixels (a 4-neighbour not
     /// clipped) get, in [0, 1]: they are partly covered by the source.
     pub edge: f64,
-    /// Whether the paper's boost (docs/model.md, M20) is applied on top, in the model.
-    pub paper: bool,
+    /// The highlight boost (docs/model.md, M20) applied on top, in the model, if any
+    /// ([`HighlightBoost::PHOTO`] by default; [`HighlightBoost::PAPER`] is the paper's,
+    /// the default before session 40).
+    pub boost: Option<HighlightBoost>,
     /// Rim light (linear, per clipped edge pixel) that weighs as much as white in the
     /// tint: the tint fades to white where the rim holds less light than this.
     pub white_rim: f64,
@@ -78,7 +81,7 @@ pub struct HighlightEstimate {
     /// Whether a region in which some channel did not clip at any of its clipped pixels
     /// gets no gain of its own (docs/highlights.md, "A channel that did not clip"): its
     /// source is at most `1 / t` times white in the other channels (`t` that channel's
-    /// share of the tint), little enough that the paper's boost alone covers it.
+    /// share of the tint), little enough that the boost alone covers it.
     pub unclipped_channel: bool,
 }
 
@@ -92,7 +95,7 @@ impl HighlightEstimate {
         threshold: 0.9,
         tint: true,
         edge: 0.25,
-        paper: true,
+        boost: Some(HighlightBoost::PHOTO),
         white_rim: 0.01,
         keep: true,
         rim_ramp: 0.0,
@@ -108,16 +111,18 @@ impl HighlightEstimate {
 
     /// Parses `auto` or `auto:KEY=VALUE,...` with keys `k` (rim constant), `max` (largest
     /// gain), `t` (threshold), `edgep` (power of the gain on the clipped edge pixels),
-    /// `edge` (share of `g - 1` on them instead), `white`, `tint`, `paper`, `keep`, `cue`,
-    /// `tintw` (0 or 1), `rim` (share of the ramp on bright unclipped pixels), and `pool`,
+    /// `edge` (share of `g - 1` on them instead), `white`, `tint`, `keep`, `cue`,
+    /// `tintw` (0 or 1), `rim` (share of the ramp on bright unclipped pixels), `pool`,
     /// `poolq`, `poolmax`, `poolk` (one exposure per photo, [`HighlightEstimate::pool`]),
-    /// `chan` (0 or 1, [`HighlightEstimate::unclipped_channel`]).
+    /// `chan` (0 or 1, [`HighlightEstimate::unclipped_channel`]), and the boost on top:
+    /// `paper` (1: the paper's constants, 0: no boost), `boost` (its amount) and `boostt`
+    /// (its threshold), applied in the order given.
     pub fn parse(spec: &str) -> Result<Self> {
         let bad = || {
             Error::param(
                 "highlight",
                 format!(
-                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edgep, edge, white, tint, paper, keep, cue, tintw, rim, pool, poolq, poolmax, poolk, chan; e.g. auto:k=0.3,max=8 or auto:pool=0.9), got '{spec}'"
+                    "expected auto or auto:KEY=VALUE,... (keys k, max, t, edgep, edge, white, tint, keep, cue, tintw, rim, pool, poolq, poolmax, poolk, chan, paper, boost, boostt; e.g. auto:k=0.3,max=8 or auto:pool=0.9), got '{spec}'"
                 ),
             )
         };
@@ -140,7 +145,21 @@ impl HighlightEstimate {
                 }
                 "white" if v >= 0.0 && v.is_finite() => e.white_rim = v,
                 "tint" if v == 0.0 || v == 1.0 => e.tint = v == 1.0,
-                "paper" if v == 0.0 || v == 1.0 => e.paper = v == 1.0,
+                "paper" if v == 0.0 || v == 1.0 => {
+                    e.boost = (v == 1.0).then_some(HighlightBoost::PAPER)
+                }
+                "boost" => {
+                    e.boost = Some(HighlightBoost {
+                        amount: v,
+                        ..e.boost.unwrap_or(HighlightBoost::PHOTO)
+                    })
+                }
+                "boostt" => {
+                    e.boost = Some(HighlightBoost {
+                        threshold_encoded: v,
+                        ..e.boost.unwrap_or(HighlightBoost::PHOTO)
+                    })
+                }
                 "keep" if v == 0.0 || v == 1.0 => e.keep = v == 1.0,
                 "rim" => e.rim_ramp = v,
                 "tintw" if v == 0.0 || v == 1.0 => e.tint_weighted = v == 1.0,
@@ -193,6 +212,9 @@ impl HighlightEstimate {
                     self.pool, self.pool_quantile, self.pool_max, self.max_gain, self.pool_k_power
                 ),
             ));
+        }
+        if let Some(boost) = &self.boost {
+            boost.validate()?;
         }
         HighlightRecovery {
             gain: self.max_gain,

@@ -177,8 +177,8 @@ fn estimate_reads_gain_and_tint_from_the_rim() {
     );
     let e = HighlightEstimate::parse("auto:k=0.5,max=4,edge=0.5,tint=0,paper=0,white=0.1").unwrap();
     assert_eq!(
-        (e.rim_k, e.max_gain, e.edge, e.tint, e.paper, e.white_rim),
-        (0.5, 4.0, 0.5, false, false, 0.1)
+        (e.rim_k, e.max_gain, e.edge, e.tint, e.boost, e.white_rim),
+        (0.5, 4.0, 0.5, false, None, 0.1)
     );
     assert_eq!(e.edge_power, None, "edge= switches to the share rule");
     let e = HighlightEstimate::parse("auto:edgep=0.5,keep=0,cue=0,tintw=0,rim=0.5").unwrap();
@@ -192,10 +192,29 @@ fn estimate_reads_gain_and_tint_from_the_rim() {
         ),
         (Some(0.5), false, false, false, 0.5)
     );
-    assert!(PhotoHighlights::parse("auto").unwrap().paper_boost());
-    assert!(!PhotoHighlights::parse("auto:paper=0")
-        .unwrap()
-        .paper_boost());
+    // The boost on top: the photo constants by default, the paper's with paper=1, none
+    // with paper=0; boost= and boostt= change one constant, in the order given.
+    let boost = |s: &str| PhotoHighlights::parse(s).unwrap().boost();
+    assert_eq!(boost("auto"), Some(HighlightBoost::PHOTO));
+    assert_eq!(boost("auto:paper=1"), Some(HighlightBoost::PAPER));
+    assert_eq!(boost("auto:paper=0"), None);
+    assert_eq!(boost("paper"), Some(HighlightBoost::PAPER));
+    assert_eq!(boost("off"), None);
+    assert_eq!(boost("2:0.95"), None);
+    assert_eq!(
+        boost("auto:paper=0,boost=0.3"),
+        Some(HighlightBoost {
+            amount: 0.3,
+            ..HighlightBoost::PHOTO
+        })
+    );
+    assert_eq!(
+        boost("auto:paper=1,boostt=0.95"),
+        Some(HighlightBoost {
+            threshold_encoded: 0.95,
+            ..HighlightBoost::PAPER
+        })
+    );
     for bad in [
         "auto:k",
         "auto:k=0",
@@ -208,6 +227,10 @@ fn estimate_reads_gain_and_tint_from_the_rim() {
         "auto:rim=-1",
         "auto:keep=2",
         "auto:cue=0.5",
+        "auto:boost=-1",
+        "auto:boost=nan",
+        "auto:boostt=1",
+        "auto:paper=2",
         "autox",
     ] {
         assert!(PhotoHighlights::parse(bad).is_err(), "{bad}");

@@ -54,5 +54,5 @@ pub use tap::{in_window, reflect, tap_weight, tap_weight_inv_area, window_taps, 
 pub(crate) use tap::{masked_tap_weight, scatter_term, scatter_term_and, ApertureEval};
 pub use tone::{
     encode, encode_derivative, linear_to_srgb, linear_to_srgb_derivative, linearize,
-    source_linear_with_derivatives, srgb_to_linear_with_derivative, Tone,
+    source_linear_with_derivatives, srgb_to_linear_with_derivative, HighlightBoost, Tone,
 };

@@ -4,7 +4,7 @@
 use super::occlusion::focus_weight;
 use super::options::ModelOptions;
 use super::scatter::{relative_disparity, scatter_radius_px};
-use super::tone::{source_linear_with_derivatives, Tone};
+use super::tone::{source_linear_with_derivatives, HighlightBoost, Tone};
 use crate::camera::Camera;
 use crate::stack::Layer;
 use crate::Real;
@@ -20,8 +20,8 @@ pub struct PixelModel<T> {
     pub focus_disparity: T,
     /// Pixel footprint of the scatter radius.
     pub footprint_px: T,
-    /// Highlight boost.
-    pub highlight: bool,
+    /// Highlight boost, if on.
+    pub highlight: Option<HighlightBoost>,
     /// Display transfer.
     pub tone: Tone,
 }
@@ -65,7 +65,7 @@ impl<T: Real> PixelModel<T> {
     /// Equation M20 of docs/model.md.
     #[inline(always)]
     pub fn linear_with_derivatives(&self, encoded: T, rel_disp: T) -> (T, T, T) {
-        source_linear_with_derivatives(encoded, rel_disp, self.highlight, &self.tone)
+        source_linear_with_derivatives(encoded, rel_disp, self.highlight.as_ref(), &self.tone)
     }
 
     /// Linear colour of a display-encoded channel value.

@@ -143,46 +143,96 @@ impl Tone {
     }
 }
 
-/// Linear colour of a source pixel, and its partial derivatives. With `highlight`, the
-/// display-encoded value is first boosted by `1 + 0.2 m`, with
-/// `m = clip(tanh(200 ((disp - f)^2 - 0.01)), 0, 1) * clip(tanh(10 (I - 200/255)), 0, 1)`.
-/// Returns the linear colour of a source pixel with the optional highlight boost, and its partial
-/// derivatives `(lin, dlin/dI, dlin/dd)` with respect to the encoded value `I` and the
-/// relative disparity `d`. (`tanh < 1`, so only the lower clip can be active.)
+/// The constants of the highlight boost (equation M20 of docs/model.md): a bright,
+/// defocused pixel's display-encoded value is multiplied by up to `1 + amount`, ramping
+/// in above `threshold_encoded`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HighlightBoost {
+    /// Largest relative increase `a` of the encoded value (the paper's 0.2).
+    pub amount: f64,
+    /// Display-encoded level `T` above which the boost ramps in (the paper's 200/255).
+    pub threshold_encoded: f64,
+}
+
+impl HighlightBoost {
+    /// The paper's boost: `a = 0.2`, `T = 200/255` (`--highlight paper` and plain
+    /// `--highlight`; a stack's `highlight`).
+    pub const PAPER: HighlightBoost = HighlightBoost {
+        amount: 0.2,
+        threshold_encoded: 200.0 / 255.0,
+    };
+
+    /// The boost on top of a photo's highlight recovery (the `auto` default of
+    /// docs/highlights.md): `a = 0.25`, `T = 0.9`. The recovery has already raised the
+    /// clipped pixels; the paper's threshold also brightened the photo's unclipped bright
+    /// pixels, whose value is right.
+    pub const PHOTO: HighlightBoost = HighlightBoost {
+        amount: 0.25,
+        threshold_encoded: 0.9,
+    };
+
+    /// Checks `0 <= amount <= 10` and `0 <= threshold_encoded < 1`; messages name
+    /// `highlight`.
+    pub fn validate(&self) -> crate::Result<()> {
+        if !(self.amount.is_finite() && (0.0..=10.0).contains(&self.amount)) {
+            return Err(crate::Error::param(
+                "highlight",
+                format!("boost amount must be in [0, 10], got {}", self.amount),
+            ));
+        }
+        let t = self.threshold_encoded;
+        if !(t.is_finite() && (0.0..1.0).contains(&t)) {
+            return Err(crate::Error::param(
+                "highlight",
+                format!("boost threshold must be in [0, 1), got {t}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Linear colour of a source pixel, and its partial derivatives. With a `boost`, the
+/// display-encoded value is first multiplied by `1 + a m`, with
+/// `m = clip(tanh(200 ((disp - f)^2 - 0.01)), 0, 1) * clip(tanh(10 (I - T)), 0, 1)`
+/// (`a`, `T`: the boost's amount and threshold; the paper's 0.2 and 200/255).
+/// Returns `(lin, dlin/dI, dlin/dd)`: the linear colour and its partial derivatives with
+/// respect to the encoded value `I` and the relative disparity `d`. (`tanh < 1`, so only
+/// the lower clip can be active.)
 /// Equation M20 of docs/model.md.
 #[inline]
 pub fn source_linear_with_derivatives<T: Real>(
     encoded: T,
     rel_disp: T,
-    highlight: bool,
+    boost: Option<&HighlightBoost>,
     tone: &Tone,
 ) -> (T, T, T) {
-    // Below the threshold (`10 (I - 200/255) <= 0`) the boost is exactly 1 with zero
+    // Below the threshold (`10 (I - T) <= 0`) the boost is exactly 1 with zero
     // derivatives (`q = 0` and `dq = 0`), so the two tanh are skipped.
-    let boost = highlight && encoded > T::c(200.0 / 255.0);
-    let (boosted, d_boost_di, d_boost_dd) = if boost {
-        let arg_p = T::c(200.0) * (rel_disp * rel_disp - T::c(0.01));
-        let arg_q = T::c(10.0) * (encoded - T::c(200.0 / 255.0));
-        let (tp, tq) = (arg_p.tanh(), arg_q.tanh());
-        let (p, q) = (tp.max(T::zero()), tq.max(T::zero()));
-        let dp = if arg_p > T::zero() {
-            T::c(400.0) * rel_disp * (T::one() - tp * tp)
-        } else {
-            T::zero()
-        };
-        let dq = if arg_q > T::zero() {
-            T::c(10.0) * (T::one() - tq * tq)
-        } else {
-            T::zero()
-        };
-        let gain = T::one() + T::c(0.2) * p * q;
-        (
-            encoded * gain,
-            gain + encoded * T::c(0.2) * p * dq,
-            encoded * T::c(0.2) * dp * q,
-        )
-    } else {
-        (encoded, T::one(), T::zero())
+    let (boosted, d_boost_di, d_boost_dd) = match boost {
+        Some(b) if encoded > T::c(b.threshold_encoded) => {
+            let amount = T::c(b.amount);
+            let arg_p = T::c(200.0) * (rel_disp * rel_disp - T::c(0.01));
+            let arg_q = T::c(10.0) * (encoded - T::c(b.threshold_encoded));
+            let (tp, tq) = (arg_p.tanh(), arg_q.tanh());
+            let (p, q) = (tp.max(T::zero()), tq.max(T::zero()));
+            let dp = if arg_p > T::zero() {
+                T::c(400.0) * rel_disp * (T::one() - tp * tp)
+            } else {
+                T::zero()
+            };
+            let dq = if arg_q > T::zero() {
+                T::c(10.0) * (T::one() - tq * tq)
+            } else {
+                T::zero()
+            };
+            let gain = T::one() + amount * p * q;
+            (
+                encoded * gain,
+                gain + encoded * amount * p * dq,
+                encoded * amount * dp * q,
+            )
+        }
+        _ => (encoded, T::one(), T::zero()),
     };
     let (lin, dlin) = tone.linearize_with_derivative(boosted);
     (lin, dlin * d_boost_di, dlin * d_boost_dd)
