@@ -1,0 +1,432 @@
+//! Scratch study: a search of whole image segments after `dfd`, judged by a render.
+//!
+//! `dfd_search judge=layered|single|aperture|gausspsf [segpx=16] [sweeps=2] SCENE...`
+//! estimates each scene's disparity with the defaults of the judge's layer, cuts the
+//! all-in-focus image into SLIC superpixels, and then, segment by segment, proposes to give
+//! a segment the median estimate of each of its neighbours; a proposal is kept where the
+//! judge's loss (0.5 L1 + 10 HSSIM of the clamped render against the traced image, on a crop
+//! that holds every pixel the change can reach) falls. Prints the MAE before and after, and
+//! the judge's loss on the whole image at the start, at the result and at the truth.
+//! Options: `src=exr` (the judge renders the unclipped aif.exr: an oracle for the clipped
+//! highlights), `from_truth=1` (start at the true disparity), `gain=G` (keep a proposal
+//! only if it lowers the loss by a fraction G), `layers=N`, `compact=C`, `mindiff=D`,
+//! `save=DIR` (the searched maps as PNG).
+use drbokeh::dfd::layered::LayeredModel;
+use drbokeh::dfd::{
+    disparity_errors, estimate_disparity, masked_disparity_errors, render_layer_on, DfdOptions,
+    RenderLayer,
+};
+use drbokeh::eval::report::SceneInputs;
+use drbokeh::{Engine, Image, RenderSettings};
+use std::collections::{BTreeSet, HashMap};
+use std::path::PathBuf;
+
+fn crop(img: &Image<f32>, x0: usize, y0: usize, w: usize, h: usize) -> Image<f32> {
+    let c = img.channels;
+    let mut data = Vec::with_capacity(w * h * c);
+    for y in y0..y0 + h {
+        let row = (y * img.width + x0) * c;
+        data.extend_from_slice(&img.data[row..row + w * c]);
+    }
+    Image::from_vec(w, h, c, data).unwrap()
+}
+
+/// SLIC superpixels of an RGB image in [0, 1]; returns one label per pixel, connected.
+fn slic(img: &Image<f32>, step: usize, compactness: f32) -> Vec<usize> {
+    let (w, h) = (img.width, img.height);
+    let mut centres: Vec<[f32; 5]> = Vec::new();
+    let mut y = step / 2;
+    while y < h {
+        let mut x = step / 2;
+        while x < w {
+            let i = y * w + x;
+            centres.push([
+                x as f32,
+                y as f32,
+                img.data[3 * i],
+                img.data[3 * i + 1],
+                img.data[3 * i + 2],
+            ]);
+            x += step;
+        }
+        y += step;
+    }
+    let mut label = vec![0usize; w * h];
+    let s2 = (step * step) as f32;
+    let m2 = compactness * compactness;
+    for _ in 0..10 {
+        let mut best = vec![f32::INFINITY; w * h];
+        for (k, c) in centres.iter().enumerate() {
+            let (cx, cy) = (c[0] as isize, c[1] as isize);
+            let r = step as isize;
+            for yy in (cy - r).max(0)..(cy + r + 1).min(h as isize) {
+                for xx in (cx - r).max(0)..(cx + r + 1).min(w as isize) {
+                    let i = yy as usize * w + xx as usize;
+                    let dc: f32 = (0..3)
+                        .map(|j| (img.data[3 * i + j] - c[2 + j]).powi(2))
+                        .sum();
+                    let ds = (xx as f32 - c[0]).powi(2) + (yy as f32 - c[1]).powi(2);
+                    let d = dc / m2 + ds / s2;
+                    if d < best[i] {
+                        best[i] = d;
+                        label[i] = k;
+                    }
+                }
+            }
+        }
+        let mut acc = vec![[0f64; 6]; centres.len()];
+        for i in 0..w * h {
+            let a = &mut acc[label[i]];
+            a[0] += (i % w) as f64;
+            a[1] += (i / w) as f64;
+            for j in 0..3 {
+                a[2 + j] += img.data[3 * i + j] as f64;
+            }
+            a[5] += 1.0;
+        }
+        for (c, a) in centres.iter_mut().zip(&acc) {
+            if a[5] > 0.0 {
+                for j in 0..5 {
+                    c[j] = (a[j] / a[5]) as f32;
+                }
+            }
+        }
+    }
+    // Connected components of the labels; fragments under 8 px join a neighbour.
+    let mut comp = vec![usize::MAX; w * h];
+    let mut n = 0;
+    let mut sizes = Vec::new();
+    for s in 0..w * h {
+        if comp[s] != usize::MAX {
+            continue;
+        }
+        let mut stack = vec![s];
+        comp[s] = n;
+        let mut size = 0;
+        while let Some(i) = stack.pop() {
+            size += 1;
+            let (x, y) = (i % w, i / w);
+            let mut push = |j: usize| {
+                if comp[j] == usize::MAX && label[j] == label[s] {
+                    comp[j] = n;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                push(i - 1);
+            }
+            if x + 1 < w {
+                push(i + 1);
+            }
+            if y > 0 {
+                push(i - w);
+            }
+            if y + 1 < h {
+                push(i + w);
+            }
+        }
+        sizes.push(size);
+        n += 1;
+    }
+    for i in 0..w * h {
+        if sizes[comp[i]] < 8 {
+            let (x, y) = (i % w, i / w);
+            let nb = [
+                (x > 0).then(|| i - 1),
+                (y > 0).then(|| i - w),
+                (x + 1 < w).then(|| i + 1),
+                (y + 1 < h).then(|| i + w),
+            ];
+            if let Some(j) = nb.into_iter().flatten().find(|&j| sizes[comp[j]] >= 8) {
+                comp[i] = comp[j];
+            }
+        }
+    }
+    comp
+}
+
+fn median(mut v: Vec<f32>) -> f32 {
+    v.sort_by(f32::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let mut kv: HashMap<String, String> = HashMap::new();
+    let mut scenes = Vec::new();
+    for a in std::env::args().skip(1) {
+        if let Some((k, v)) = a.split_once('=') {
+            kv.insert(k.into(), v.into());
+        } else {
+            scenes.push(PathBuf::from(a));
+        }
+    }
+    let get = |k: &str, d: &str| kv.get(k).cloned().unwrap_or(d.to_string());
+    let judge = get("judge", "layered");
+    let segpx: usize = get("segpx", "16").parse().unwrap();
+    let sweeps: usize = get("sweeps", "2").parse().unwrap();
+    let compact: f32 = get("compact", "0.15").parse().unwrap();
+    let mindiff: f32 = get("mindiff", "0.03").parse().unwrap();
+    let gain: f64 = get("gain", "0.0").parse().unwrap();
+    let layers: usize = get("layers", "5").parse().unwrap();
+    // src=exr: the judge renders the unclipped all-in-focus image (an oracle for the
+    // highlights, aif.exr encoded with gamma 2.2) instead of the clipped aif.png.
+    let src = get("src", "png");
+    let est_layer = match judge.as_str() {
+        "aperture" => RenderLayer::Aperture,
+        "gausspsf" => RenderLayer::GaussPsf,
+        _ => RenderLayer::DrBokeh,
+    };
+    let mut totals = [0f64; 3];
+    for path in &scenes {
+        let scene = SceneInputs::load(path).unwrap();
+        let mut s = RenderSettings::physical(scene.focus);
+        s.camera.blur_k = scene.blur_k;
+        s.camera.window = drbokeh::Window::auto_unclipped(scene.blur_k + 1.0);
+        let target = &scene.ground_truth;
+        let t0 = std::time::Instant::now();
+        let o = DfdOptions::new(s.clone(), est_layer);
+        // from_truth=1: the search starts at the true disparity (is the truth a local
+        // minimum of these moves?).
+        let est = if get("from_truth", "0") == "1" {
+            scene.disparity.clone()
+        } else {
+            estimate_disparity(&scene.aif, target, &o, &mut |_| {})
+                .unwrap()
+                .disparity
+        };
+        let t_est = t0.elapsed().as_secs_f64();
+        let (w, h) = (est.width, est.height);
+        // judge=truelayers (an oracle): the scene's true layer stack (true alpha and hidden
+        // colours), each pixel's proposed disparity written into the layer that owns it (the
+        // billboard whose disparity is the pixel's true disparity); at the true disparity it
+        // renders the true layers exactly.
+        let owner: Vec<usize> = (0..scene.disparity.data.len())
+            .map(|i| {
+                let t = scene.disparity.data[i];
+                (0..scene.layers.layers.len())
+                    .min_by(|&a, &b| {
+                        let da = (scene.layers.layers[a].disparity.data[i] - t).abs();
+                        let db = (scene.layers.layers[b].disparity.data[i] - t).abs();
+                        da.total_cmp(&db)
+                    })
+                    .unwrap()
+            })
+            .collect();
+        let stack_at = |d: &Image<f32>, x0: usize, y0: usize| -> drbokeh::LayerStack<f32> {
+            let layers = scene
+                .layers
+                .layers
+                .iter()
+                .enumerate()
+                .map(|(k, l)| {
+                    let mut disparity = crop(&l.disparity, x0, y0, d.width, d.height);
+                    for y in 0..d.height {
+                        for x in 0..d.width {
+                            if owner[(y0 + y) * w + x0 + x] == k {
+                                disparity.data[y * d.width + x] = d.data[y * d.width + x];
+                            }
+                        }
+                    }
+                    drbokeh::Layer {
+                        rgb_encoded: crop(&l.rgb_encoded, x0, y0, d.width, d.height),
+                        alpha: crop(&l.alpha, x0, y0, d.width, d.height),
+                        disparity,
+                    }
+                })
+                .collect();
+            drbokeh::LayerStack::new(layers).unwrap()
+        };
+        let lossf =
+            |aif: &Image<f32>, d: &Image<f32>, tg: &Image<f32>, x0: usize, y0: usize| -> f64 {
+                let r = match judge.as_str() {
+                    "truelayers" => drbokeh::render(
+                        &stack_at(d, x0, y0),
+                        &s,
+                        Engine::Fast,
+                        &drbokeh::NoProgress,
+                    )
+                    .unwrap(),
+                    "layered" => LayeredModel::decompose(aif, d, layers)
+                        .unwrap()
+                        .render(Engine::Fast, aif, d, &s)
+                        .unwrap(),
+                    "single" => {
+                        render_layer_on(RenderLayer::DrBokeh, Engine::Fast, aif, d, &s).unwrap()
+                    }
+                    _ => render_layer_on(est_layer, Engine::Fast, aif, d, &s).unwrap(),
+                };
+                let c = Image::from_vec(
+                    r.width,
+                    r.height,
+                    3,
+                    r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+                )
+                .unwrap();
+                0.5 * drbokeh::loss::l1(&c, tg).unwrap() as f64
+                    + 10.0 * drbokeh::loss::hssim(&c, tg).unwrap() as f64
+            };
+        let judge_aif: Image<f32> = if src == "exr" {
+            let lin: Image<f32> = drbokeh::io::read_rgb(&path.join("aif.exr")).unwrap();
+            let data = lin
+                .data
+                .iter()
+                .map(|v| v.max(0.0).powf(1.0 / 2.2))
+                .collect();
+            Image::from_vec(lin.width, lin.height, 3, data).unwrap()
+        } else {
+            scene.aif.clone()
+        };
+        let seg = slic(&scene.aif, segpx, compact);
+        let nseg = seg.iter().max().unwrap() + 1;
+        let mut members = vec![Vec::new(); nseg];
+        let mut nbrs = vec![BTreeSet::new(); nseg];
+        for i in 0..w * h {
+            members[seg[i]].push(i);
+            let (x, y) = (i % w, i / w);
+            if x + 1 < w && seg[i + 1] != seg[i] {
+                nbrs[seg[i]].insert(seg[i + 1]);
+                nbrs[seg[i + 1]].insert(seg[i]);
+            }
+            if y + 1 < h && seg[i + w] != seg[i] {
+                nbrs[seg[i]].insert(seg[i + w]);
+                nbrs[seg[i + w]].insert(seg[i]);
+            }
+        }
+        let mut cur = est.clone();
+        let dmax = cur
+            .data
+            .iter()
+            .map(|&v| (v as f64 - scene.focus).abs())
+            .fold(0.0, f64::max);
+        let reach = (scene.blur_k * dmax.max(0.05)).ceil() as usize + 2;
+        let mut kept = 0;
+        let mut tried = 0;
+        for _ in 0..sweeps {
+            for k in 0..nseg {
+                if members[k].is_empty() {
+                    continue;
+                }
+                let med = median(members[k].iter().map(|&i| cur.data[i]).collect());
+                let mut cands: Vec<f32> = Vec::new();
+                for &n in &nbrs[k] {
+                    let m = median(members[n].iter().map(|&i| cur.data[i]).collect());
+                    if (m - med).abs() > mindiff && cands.iter().all(|c| (c - m).abs() > mindiff) {
+                        cands.push(m);
+                    }
+                }
+                if cands.is_empty() {
+                    continue;
+                }
+                let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+                for &i in &members[k] {
+                    x0 = x0.min(i % w);
+                    x1 = x1.max(i % w);
+                    y0 = y0.min(i / w);
+                    y1 = y1.max(i / w);
+                }
+                let grow = |a: usize, b: usize, n: usize| {
+                    let lo = a.saturating_sub(2 * reach);
+                    let hi = (b + 2 * reach + 1).min(n);
+                    // at least 40 px (HSSIM's largest window is 31)
+                    let lo = if hi - lo < 40 {
+                        hi.saturating_sub(40)
+                    } else {
+                        lo
+                    };
+                    let hi = if hi - lo < 40 { (lo + 40).min(n) } else { hi };
+                    (lo, hi)
+                };
+                let (cx0, cx1) = grow(x0, x1, w);
+                let (cy0, cy1) = grow(y0, y1, h);
+                let (cw, ch) = (cx1 - cx0, cy1 - cy0);
+                let a = crop(&judge_aif, cx0, cy0, cw, ch);
+                let tg = crop(target, cx0, cy0, cw, ch);
+                let base_d = crop(&cur, cx0, cy0, cw, ch);
+                let base = lossf(&a, &base_d, &tg, cx0, cy0);
+                let mut best = (base * (1.0 - gain), None);
+                for &c in &cands {
+                    tried += 1;
+                    let mut d = base_d.clone();
+                    for &i in &members[k] {
+                        let (x, y) = (i % w - cx0, i / w - cy0);
+                        d.data[y * cw + x] = c;
+                    }
+                    let l = lossf(&a, &d, &tg, cx0, cy0);
+                    if l < best.0 {
+                        best = (l, Some(c));
+                    }
+                }
+                if let Some(c) = best.1 {
+                    kept += 1;
+                    for &i in &members[k] {
+                        cur.data[i] = c;
+                    }
+                }
+            }
+        }
+        // The judge's loss on the whole image at the start, at the search's result and at
+        // the true disparity: which of the three the objective itself ranks first.
+        let (l_est, l_cur, l_true) = (
+            lossf(&judge_aif, &est, target, 0, 0),
+            lossf(&judge_aif, &cur, target, 0, 0),
+            lossf(&judge_aif, &scene.disparity, target, 0, 0),
+        );
+        println!("  whole-image loss: start {l_est:.4}, search {l_cur:.4}, truth {l_true:.4}");
+        let bg = scene.layers.layers.last().unwrap().disparity.data[0];
+        let fg = |i: usize| (scene.disparity.data[i] - bg).abs() > 1e-4;
+        let e0 = disparity_errors(&est, &scene.disparity);
+        let e1 = disparity_errors(&cur, &scene.disparity);
+        let f0 = masked_disparity_errors(&est, &scene.disparity, None, fg).map(|x| x.mae);
+        let f1 = masked_disparity_errors(&cur, &scene.disparity, None, fg).map(|x| x.mae);
+        let b0 = masked_disparity_errors(&est, &scene.disparity, None, |i| !fg(i)).map(|x| x.mae);
+        let b1 = masked_disparity_errors(&cur, &scene.disparity, None, |i| !fg(i)).map(|x| x.mae);
+        let med = median(scene.disparity.data.clone());
+        let cst = Image::from_vec(w, h, 1, vec![med; w * h]).unwrap();
+        let ec = disparity_errors(&cst, &scene.disparity);
+        println!(
+            "{judge} {}/{} K {:.1} f {:.2} | MAE {:.4} -> {:.4} (fg {:.3} -> {:.3}, bg {:.3} -> {:.3}) const {:.4} | segs {nseg} tried {tried} kept {kept} | est {t_est:.1}s total {:.1}s",
+            path.parent().unwrap().file_name().unwrap().to_string_lossy(),
+            scene.name,
+            scene.blur_k,
+            scene.focus,
+            e0.mae,
+            e1.mae,
+            f0.unwrap_or(f64::NAN),
+            f1.unwrap_or(f64::NAN),
+            b0.unwrap_or(f64::NAN),
+            b1.unwrap_or(f64::NAN),
+            ec.mae,
+            t0.elapsed().as_secs_f64()
+        );
+        totals[0] += e0.mae;
+        totals[1] += e1.mae;
+        totals[2] += 1.0;
+        if let Some(dir) = kv.get("save") {
+            std::fs::create_dir_all(dir).unwrap();
+            let out = format!(
+                "{dir}/{}_{}_{judge}.png",
+                path.parent()
+                    .unwrap()
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy(),
+                scene.name
+            );
+            let rgb =
+                Image::from_vec(w, h, 3, cur.data.iter().flat_map(|&v| [v; 3]).collect()).unwrap();
+            drbokeh::io::write_output(
+                std::path::Path::new(&out),
+                &rgb,
+                drbokeh::io::BitDepth::Eight,
+                |v| v,
+            )
+            .unwrap();
+        }
+    }
+    println!(
+        "{judge} MEAN MAE {:.4} -> {:.4} (n={})",
+        totals[0] / totals[2],
+        totals[1] / totals[2],
+        totals[2]
+    );
+}
