@@ -169,7 +169,7 @@ fn main() {
     let gain: f64 = get("gain", "0.0").parse().unwrap();
     let layers: usize = get("layers", "5").parse().unwrap();
     // src=exr: the judge renders the unclipped all-in-focus image (an oracle for the
-    // highlights, aif.exr encoded with gamma 2.2) instead of the clipped aif.png.
+    // highlights: aif.exr encoded as aif.png is, exact sRGB, but not clipped).
     let src = get("src", "png");
     let est_layer = match judge.as_str() {
         "aperture" => RenderLayer::Aperture,
@@ -266,13 +266,9 @@ fn main() {
                     + 10.0 * drbokeh::loss::hssim(&c, tg).unwrap() as f64
             };
         let judge_aif: Image<f32> = if src == "exr" {
+            // Encoded as the tracer encodes aif.png (exact sRGB), without its clipping.
             let lin: Image<f32> = drbokeh::io::read_rgb(&path.join("aif.exr")).unwrap();
-            let data = lin
-                .data
-                .iter()
-                .map(|v| v.max(0.0).powf(1.0 / 2.2))
-                .collect();
-            Image::from_vec(lin.width, lin.height, 3, data).unwrap()
+            drbokeh::trace::encode_image(&lin)
         } else {
             scene.aif.clone()
         };
