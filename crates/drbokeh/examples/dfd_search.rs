@@ -10,7 +10,12 @@
 //! Options: `src=exr` (the judge renders the unclipped aif.exr: an oracle for the clipped
 //! highlights), `from_truth=1` (start at the true disparity), `gain=G` (keep a proposal
 //! only if it lowers the loss by a fraction G), `layers=N`, `compact=C`, `mindiff=D`,
-//! `save=DIR` (the searched maps as PNG).
+//! `save=DIR` (the searched maps as PNG), `matting=PX` (judge=layered: soft alpha at the
+//! decomposition's cut edges, `LayeringOptions::matting_px`), `cguard=PX` (judge=layered:
+//! hidden colours filled from pixels at least PX from another layer), `pure=PX`
+//! (judge=layered: see [`purify`]), `talpha=hard` and
+//! `tcolour=fill|aif|aifown`, `recut=1` (judge=truelayers: the true layers degraded towards what
+//! a decomposition has; see the comments at `talpha` and `recut`).
 use drbokeh::dfd::layered::LayeredModel;
 use drbokeh::dfd::{
     disparity_errors, estimate_disparity, masked_disparity_errors, render_layer_on, DfdOptions,
@@ -145,6 +150,68 @@ fn slic(img: &Image<f32>, step: usize, compactness: f32) -> Vec<usize> {
     comp
 }
 
+/// `pure=R`: each layer's colour is made again from its own pixels farther than `R` from
+/// any other layer's (the interior, whose colour is not mixed with a neighbour's at a soft
+/// edge): on its edge pixels and wherever it is filled in behind nearer layers, by Telea
+/// inpainting of the interior. A layer without interior keeps its colours. Alpha stays as
+/// the decomposition made it.
+fn purify(
+    dec: drbokeh::layering::Decomposition<f32>,
+    aif: &Image<f32>,
+    d: &Image<f32>,
+    r: usize,
+) -> drbokeh::LayerStack<f32> {
+    use drbokeh::layering::Region;
+    let (w, h) = (aif.width, aif.height);
+    let owner: Vec<usize> = d
+        .data
+        .iter()
+        .map(|&v| dec.thresholds.iter().filter(|&&t| (v as f64) < t).count())
+        .collect();
+    let mut layers = dec.stack.layers;
+    for (k, layer) in layers.iter_mut().enumerate() {
+        // Interior: owned, and no pixel of another layer within r (Chebyshev).
+        let interior: Vec<bool> = (0..w * h)
+            .map(|i| {
+                if owner[i] != k {
+                    return false;
+                }
+                let (x, y) = ((i % w) as isize, (i / w) as isize);
+                let r = r as isize;
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        let (xx, yy) = (x + dx, y + dy);
+                        if xx >= 0
+                            && yy >= 0
+                            && (xx as usize) < w
+                            && (yy as usize) < h
+                            && owner[yy as usize * w + xx as usize] != k
+                        {
+                            return false;
+                        }
+                    }
+                }
+                true
+            })
+            .collect();
+        if !interior.iter().any(|&b| b) {
+            continue;
+        }
+        let region: Vec<Region> = interior
+            .iter()
+            .map(|&b| if b { Region::Known } else { Region::Fill })
+            .collect();
+        let filled = drbokeh::layering::inpaint_telea(aif, &region, &Default::default());
+        for i in 0..w * h {
+            if !interior[i] && filled.filled[i] && layer.alpha.data[i] > 0.0 {
+                layer.rgb_encoded.data[3 * i..3 * i + 3]
+                    .copy_from_slice(&filled.image.data[3 * i..3 * i + 3]);
+            }
+        }
+    }
+    drbokeh::LayerStack::new(layers).unwrap()
+}
+
 fn median(mut v: Vec<f32>) -> f32 {
     v.sort_by(f32::total_cmp);
     v[v.len() / 2]
@@ -168,6 +235,9 @@ fn main() {
     let mindiff: f32 = get("mindiff", "0.03").parse().unwrap();
     let gain: f64 = get("gain", "0.0").parse().unwrap();
     let layers: usize = get("layers", "5").parse().unwrap();
+    let matting: usize = get("matting", "0").parse().unwrap();
+    let cguard: usize = get("cguard", "0").parse().unwrap();
+    let pure: usize = get("pure", "0").parse().unwrap();
     // src=exr: the judge renders the unclipped all-in-focus image (an oracle for the
     // highlights: aif.exr encoded as aif.png is, exact sRGB, but not clipped).
     let src = get("src", "png");
@@ -212,28 +282,108 @@ fn main() {
                     .unwrap()
             })
             .collect();
+        // Degraded oracles, to tell which part of the true layers the truth's minimum needs:
+        // `talpha=hard` thresholds each layer's alpha at 1/2 (the last stays opaque), as a
+        // decomposition by pixel labels has it; `tcolour=fill` keeps each layer's true
+        // colour on the pixels it owns and fills the rest (hidden behind nearer layers) by
+        // Telea inpainting of them, as the decomposition guesses hidden colours;
+        // `tcolour=aif` also puts the all-in-focus colour (the mix at soft edges) on the
+        // owned pixels before the fill, as the decomposition does; `tcolour=aifown` the
+        // all-in-focus colour on the owned pixels and the true colours behind them.
+        let talpha = get("talpha", "true");
+        let tcolour = get("tcolour", "true");
+        let nl = scene.layers.layers.len();
+        let colours: Vec<Image<f32>> = (0..nl)
+            .map(|k| {
+                let l = &scene.layers.layers[k];
+                if tcolour == "true" {
+                    return l.rgb_encoded.clone();
+                }
+                if tcolour == "aifown" {
+                    // The all-in-focus colour on the owned pixels, the true colour elsewhere.
+                    let mut c = l.rgb_encoded.clone();
+                    for (i, &o) in owner.iter().enumerate() {
+                        if o == k {
+                            c.data[3 * i..3 * i + 3]
+                                .copy_from_slice(&scene.aif.data[3 * i..3 * i + 3]);
+                        }
+                    }
+                    return c;
+                }
+                let src = if tcolour == "aif" {
+                    &scene.aif
+                } else {
+                    &l.rgb_encoded
+                };
+                let region: Vec<drbokeh::layering::Region> = owner
+                    .iter()
+                    .map(|&o| {
+                        if o == k {
+                            drbokeh::layering::Region::Known
+                        } else {
+                            drbokeh::layering::Region::Fill
+                        }
+                    })
+                    .collect();
+                if !region.contains(&drbokeh::layering::Region::Known) {
+                    return l.rgb_encoded.clone();
+                }
+                drbokeh::layering::inpaint_telea(src, &region, &Default::default()).image
+            })
+            .collect();
+        // `recut=1`: ownership follows the proposal, as in a decomposition cut at the
+        // proposed disparity: a pixel whose proposed disparity is nearest another layer's
+        // plane moves into that layer (opaque, the all-in-focus colour), and where it moves
+        // farther the layers in front of it there turn transparent.
+        let recut = get("recut", "0") == "1";
         let stack_at = |d: &Image<f32>, x0: usize, y0: usize| -> drbokeh::LayerStack<f32> {
-            let layers = scene
+            let mut layers: Vec<drbokeh::Layer<f32>> = scene
                 .layers
                 .layers
                 .iter()
                 .enumerate()
                 .map(|(k, l)| {
-                    let mut disparity = crop(&l.disparity, x0, y0, d.width, d.height);
-                    for y in 0..d.height {
-                        for x in 0..d.width {
-                            if owner[(y0 + y) * w + x0 + x] == k {
-                                disparity.data[y * d.width + x] = d.data[y * d.width + x];
-                            }
+                    let mut alpha = crop(&l.alpha, x0, y0, d.width, d.height);
+                    if talpha == "hard" && k + 1 < nl {
+                        for a in &mut alpha.data {
+                            *a = if *a >= 0.5 { 1.0 } else { 0.0 };
                         }
                     }
                     drbokeh::Layer {
-                        rgb_encoded: crop(&l.rgb_encoded, x0, y0, d.width, d.height),
-                        alpha: crop(&l.alpha, x0, y0, d.width, d.height),
-                        disparity,
+                        rgb_encoded: crop(&colours[k], x0, y0, d.width, d.height),
+                        alpha,
+                        disparity: crop(&l.disparity, x0, y0, d.width, d.height),
                     }
                 })
                 .collect();
+            for y in 0..d.height {
+                for x in 0..d.width {
+                    let (j, g) = (y * d.width + x, (y0 + y) * w + x0 + x);
+                    let t = owner[g];
+                    let v = d.data[j];
+                    let k = if recut {
+                        (0..nl)
+                            .min_by(|&a, &b| {
+                                let da = (scene.layers.layers[a].disparity.data[g] - v).abs();
+                                let db = (scene.layers.layers[b].disparity.data[g] - v).abs();
+                                da.total_cmp(&db)
+                            })
+                            .unwrap()
+                    } else {
+                        t
+                    };
+                    layers[k].disparity.data[j] = v;
+                    if k != t {
+                        layers[k].alpha.data[j] = 1.0;
+                        for c in 0..3 {
+                            layers[k].rgb_encoded.data[3 * j + c] = scene.aif.data[3 * g + c];
+                        }
+                        for l in layers.iter_mut().take(k).skip(t) {
+                            l.alpha.data[j] = 0.0;
+                        }
+                    }
+                }
+            }
             drbokeh::LayerStack::new(layers).unwrap()
         };
         let lossf =
@@ -246,6 +396,34 @@ fn main() {
                         &drbokeh::NoProgress,
                     )
                     .unwrap(),
+                    "layered" if pure > 0 => {
+                        let dec = drbokeh::layering::layers_from_disparity(
+                            aif,
+                            d,
+                            &drbokeh::layering::LayeringOptions {
+                                max_layers: layers,
+                                ..Default::default()
+                            },
+                        )
+                        .unwrap();
+                        let st = purify(dec, aif, d, pure);
+                        drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                    }
+                    "layered" if matting > 0 || cguard > 0 => {
+                        // The decomposition with soft alpha at its cut edges (the photo
+                        // pipeline's edge matting) or fills that skip edge pixels, rendered
+                        // as it is.
+                        let opts = drbokeh::layering::LayeringOptions {
+                            max_layers: layers,
+                            matting_px: matting,
+                            colour_guard_px: cguard,
+                            ..Default::default()
+                        };
+                        let st = drbokeh::layering::layers_from_disparity(aif, d, &opts)
+                            .unwrap()
+                            .stack;
+                        drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                    }
                     "layered" => LayeredModel::decompose(aif, d, layers)
                         .unwrap()
                         .render(Engine::Fast, aif, d, &s)
