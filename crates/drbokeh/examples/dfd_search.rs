@@ -13,7 +13,8 @@
 //! `save=DIR` (the searched maps as PNG), `matting=PX` (judge=layered: soft alpha at the
 //! decomposition's cut edges, `LayeringOptions::matting_px`), `cguard=PX` (judge=layered:
 //! hidden colours filled from pixels at least PX from another layer), `pure=PX`
-//! (judge=layered: see [`purify`]), `talpha=hard` and
+//! (judge=layered: see [`purify`]), `fit=N` (judge=layered: see [`fit_edge_colours`]),
+//! `talpha=hard` and
 //! `tcolour=fill|aif|aifown`, `recut=1` (judge=truelayers: the true layers degraded towards what
 //! a decomposition has; see the comments at `talpha` and `recut`).
 use drbokeh::dfd::layered::LayeredModel;
@@ -163,11 +164,7 @@ fn purify(
 ) -> drbokeh::LayerStack<f32> {
     use drbokeh::layering::Region;
     let (w, h) = (aif.width, aif.height);
-    let owner: Vec<usize> = d
-        .data
-        .iter()
-        .map(|&v| dec.thresholds.iter().filter(|&&t| (v as f64) < t).count())
-        .collect();
+    let owner = owner_of(&dec.thresholds, d);
     let mut layers = dec.stack.layers;
     for (k, layer) in layers.iter_mut().enumerate() {
         // Interior: owned, and no pixel of another layer within r (Chebyshev).
@@ -212,6 +209,116 @@ fn purify(
     drbokeh::LayerStack::new(layers).unwrap()
 }
 
+/// Each pixel's owning layer in a decomposition cut at `thresholds` (nearest first).
+fn owner_of(thresholds: &[f64], d: &Image<f32>) -> Vec<usize> {
+    d.data
+        .iter()
+        .map(|&v| thresholds.iter().filter(|&&t| (v as f64) < t).count())
+        .collect()
+}
+
+/// Owned pixels with a pixel of another owner within `r` (Chebyshev): the mixed edge.
+fn edge_mask(owner: &[usize], w: usize, h: usize, r: usize) -> Vec<bool> {
+    let r = r as isize;
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as isize, (i / w) as isize);
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (xx, yy) = (x + dx, y + dy);
+                    if xx >= 0
+                        && yy >= 0
+                        && (xx as usize) < w
+                        && (yy as usize) < h
+                        && owner[yy as usize * w + xx as usize] != owner[i]
+                    {
+                        return true;
+                    }
+                }
+            }
+            false
+        })
+        .collect()
+}
+
+/// `fit=N`: the colours of the mixed edge pixels (owned pixels within 1 px of another
+/// layer) of the decomposition at `d`, fitted to the defocused image by `iters` Adam steps
+/// (learning rate 0.02, encoded colour in [0, 1]) on 0.5 L1 + 10 HSSIM of the clamped
+/// render. Returns the edge mask and the fitted colours (full image, RGB).
+fn fit_edge_colours(
+    aif: &Image<f32>,
+    d: &Image<f32>,
+    target: &Image<f32>,
+    s: &RenderSettings,
+    layers: usize,
+    iters: usize,
+) -> (Vec<bool>, Vec<f32>) {
+    let (w, h) = (aif.width, aif.height);
+    let opts = drbokeh::layering::LayeringOptions {
+        max_layers: layers,
+        ..Default::default()
+    };
+    let dec = drbokeh::layering::layers_from_disparity(aif, d, &opts).unwrap();
+    let owner = owner_of(&dec.thresholds, d);
+    let edge = edge_mask(&owner, w, h, 1);
+    let mut stack = dec.stack;
+    let idx: Vec<usize> = (0..w * h).filter(|&i| edge[i]).collect();
+    let mut x: Vec<f32> = idx
+        .iter()
+        .flat_map(|&i| stack.layers[owner[i]].rgb_encoded.data[3 * i..3 * i + 3].to_vec())
+        .collect();
+    let (mut m, mut v) = (vec![0f32; x.len()], vec![0f32; x.len()]);
+    let (b1, b2, lr) = (0.9f32, 0.999f32, 0.02f32);
+    for t in 1..=iters {
+        for (j, &i) in idx.iter().enumerate() {
+            stack.layers[owner[i]].rgb_encoded.data[3 * i..3 * i + 3]
+                .copy_from_slice(&x[3 * j..3 * j + 3]);
+        }
+        let (r, tape) =
+            drbokeh::render_with_tape_on(&stack, s, Engine::Fast, &drbokeh::NoProgress).unwrap();
+        let c = Image::from_vec(
+            r.width,
+            r.height,
+            3,
+            r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+        )
+        .unwrap();
+        let (_, g1) = drbokeh::loss::l1_grad(&c, target).unwrap();
+        let (_, g2) = drbokeh::loss::hssim_grad(&c, target).unwrap();
+        let g = Image::from_vec(
+            r.width,
+            r.height,
+            3,
+            (0..r.data.len())
+                .map(|q| {
+                    if (0.0..=1.0).contains(&r.data[q]) {
+                        0.5 * g1.data[q] + 10.0 * g2.data[q]
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+        )
+        .unwrap();
+        let grads = tape.backward(&g, &drbokeh::NoProgress).unwrap();
+        let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
+        for (j, &i) in idx.iter().enumerate() {
+            for ch in 0..3 {
+                let q = 3 * j + ch;
+                let gr = grads.layers[owner[i]].rgb.data[3 * i + ch];
+                m[q] = b1 * m[q] + (1.0 - b1) * gr;
+                v[q] = b2 * v[q] + (1.0 - b2) * gr * gr;
+                x[q] = (x[q] - lr * (m[q] / c1) / ((v[q] / c2).sqrt() + 1e-8)).clamp(0.0, 1.0);
+            }
+        }
+    }
+    let mut full = vec![0f32; w * h * 3];
+    for (j, &i) in idx.iter().enumerate() {
+        full[3 * i..3 * i + 3].copy_from_slice(&x[3 * j..3 * j + 3]);
+    }
+    (edge, full)
+}
+
 fn median(mut v: Vec<f32>) -> f32 {
     v.sort_by(f32::total_cmp);
     v[v.len() / 2]
@@ -238,6 +345,7 @@ fn main() {
     let matting: usize = get("matting", "0").parse().unwrap();
     let cguard: usize = get("cguard", "0").parse().unwrap();
     let pure: usize = get("pure", "0").parse().unwrap();
+    let fit: usize = get("fit", "0").parse().unwrap();
     // src=exr: the judge renders the unclipped all-in-focus image (an oracle for the
     // highlights: aif.exr encoded as aif.png is, exact sRGB, but not clipped).
     let src = get("src", "png");
@@ -386,6 +494,21 @@ fn main() {
             }
             drbokeh::LayerStack::new(layers).unwrap()
         };
+        let judge_aif: Image<f32> = if src == "exr" {
+            // Encoded as the tracer encodes aif.png (exact sRGB), without its clipping.
+            let lin: Image<f32> = drbokeh::io::read_rgb(&path.join("aif.exr")).unwrap();
+            drbokeh::trace::encode_image(&lin)
+        } else {
+            scene.aif.clone()
+        };
+        let t_fit = std::time::Instant::now();
+        let fitted = (fit > 0).then(|| fit_edge_colours(&judge_aif, &est, target, &s, layers, fit));
+        if fit > 0 {
+            println!(
+                "  edge colours fitted in {:.1}s",
+                t_fit.elapsed().as_secs_f64()
+            );
+        }
         let lossf =
             |aif: &Image<f32>, d: &Image<f32>, tg: &Image<f32>, x0: usize, y0: usize| -> f64 {
                 let r = match judge.as_str() {
@@ -396,6 +519,32 @@ fn main() {
                         &drbokeh::NoProgress,
                     )
                     .unwrap(),
+                    "layered" if fit > 0 => {
+                        // The decomposition at the proposal, with the fitted colours on the
+                        // pixels of the start's mixed edge, in whichever layer owns them now.
+                        let dec = drbokeh::layering::layers_from_disparity(
+                            aif,
+                            d,
+                            &drbokeh::layering::LayeringOptions {
+                                max_layers: layers,
+                                ..Default::default()
+                            },
+                        )
+                        .unwrap();
+                        let own = owner_of(&dec.thresholds, d);
+                        let mut st = dec.stack;
+                        let (edge, rgb) = fitted.as_ref().unwrap();
+                        for y in 0..d.height {
+                            for x in 0..d.width {
+                                let (j, g) = (y * d.width + x, (y0 + y) * w + x0 + x);
+                                if edge[g] {
+                                    st.layers[own[j]].rgb_encoded.data[3 * j..3 * j + 3]
+                                        .copy_from_slice(&rgb[3 * g..3 * g + 3]);
+                                }
+                            }
+                        }
+                        drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                    }
                     "layered" if pure > 0 => {
                         let dec = drbokeh::layering::layers_from_disparity(
                             aif,
@@ -443,13 +592,6 @@ fn main() {
                 0.5 * drbokeh::loss::l1(&c, tg).unwrap() as f64
                     + 10.0 * drbokeh::loss::hssim(&c, tg).unwrap() as f64
             };
-        let judge_aif: Image<f32> = if src == "exr" {
-            // Encoded as the tracer encodes aif.png (exact sRGB), without its clipping.
-            let lin: Image<f32> = drbokeh::io::read_rgb(&path.join("aif.exr")).unwrap();
-            drbokeh::trace::encode_image(&lin)
-        } else {
-            scene.aif.clone()
-        };
         let seg = slic(&scene.aif, segpx, compact);
         let nseg = seg.iter().max().unwrap() + 1;
         let mut members = vec![Vec::new(); nseg];
