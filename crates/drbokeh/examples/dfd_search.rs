@@ -14,6 +14,7 @@
 //! decomposition's cut edges, `LayeringOptions::matting_px`), `cguard=PX` (judge=layered:
 //! hidden colours filled from pixels at least PX from another layer), `pure=PX`
 //! (judge=layered: see [`purify`]), `fit=N` (judge=layered: see [`fit_edge_colours`]),
+//! `split=N` (judge=layered: see [`Split`]),
 //! `talpha=hard` and
 //! `tcolour=fill|aif|aifown`, `recut=1` (judge=truelayers: the true layers degraded towards what
 //! a decomposition has; see the comments at `talpha` and `recut`).
@@ -319,6 +320,223 @@ fn fit_edge_colours(
     (edge, full)
 }
 
+/// `split=N`: each mixed edge pixel `i` of the decomposition at the start (owned pixels
+/// within 1 px of another layer; no feather) is split between its own surface (coverage
+/// `cov`, colour `own`) and the surface of a neighbouring pixel `nb` of another layer
+/// (colour `other`), constrained to composite to the all-in-focus colour:
+/// `cov own + (1 - cov) other = I`. `cov` (a sigmoid, in [0.02, 0.98]) and `own` are
+/// fitted to the defocused image by N Adam steps; `other` follows from the constraint.
+struct Split {
+    edge: Vec<bool>,
+    nb: Vec<usize>,
+    cov: Vec<f32>,
+    own: Vec<f32>,
+}
+
+impl Split {
+    fn other(&self, aif: &[f32], g: usize, c: usize) -> f32 {
+        let s = self.cov[g];
+        ((aif[3 * g + c] - s * self.own[3 * g + c]) / (1.0 - s)).max(0.0)
+    }
+
+    /// Writes the split into `stack` (a decomposition of the crop at `x0, y0`, `cw` x `ch`,
+    /// of an image `w` wide) whose owners are `own_d`: the nearer of the two owners gets
+    /// alpha and its colour, the farther becomes opaque with the other colour, the layers
+    /// in front of the farther one turn transparent there. Skipped where the neighbour is
+    /// outside the crop or both now have one owner.
+    #[allow(clippy::too_many_arguments)]
+    fn apply(
+        &self,
+        stack: &mut drbokeh::LayerStack<f32>,
+        own_d: &[usize],
+        aif_full: &[f32],
+        x0: usize,
+        y0: usize,
+        cw: usize,
+        ch: usize,
+        w: usize,
+    ) {
+        for y in 0..ch {
+            for x in 0..cw {
+                let (j, g) = (y * cw + x, (y0 + y) * w + x0 + x);
+                if !self.edge[g] {
+                    continue;
+                }
+                let nb = self.nb[g];
+                let (nx, ny) = (nb % w, nb / w);
+                if nx < x0 || ny < y0 || nx >= x0 + cw || ny >= y0 + ch {
+                    continue;
+                }
+                let (o1, o2) = (own_d[j], own_d[(ny - y0) * cw + nx - x0]);
+                if o1 == o2 {
+                    continue;
+                }
+                let s = self.cov[g];
+                let own: [f32; 3] = std::array::from_fn(|c| self.own[3 * g + c]);
+                let oth: [f32; 3] = std::array::from_fn(|c| self.other(aif_full, g, c));
+                let (front, back, a, cf, cb) = if o1 < o2 {
+                    (o1, o2, s, own, oth)
+                } else {
+                    (o2, o1, 1.0 - s, oth, own)
+                };
+                for (k, l) in stack.layers.iter_mut().enumerate() {
+                    if k == front {
+                        l.alpha.data[j] = a;
+                        l.rgb_encoded.data[3 * j..3 * j + 3].copy_from_slice(&cf);
+                    } else if k == back {
+                        l.alpha.data[j] = 1.0;
+                        l.rgb_encoded.data[3 * j..3 * j + 3].copy_from_slice(&cb);
+                    } else if k < back {
+                        l.alpha.data[j] = 0.0;
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn split_opts(layers: usize) -> drbokeh::layering::LayeringOptions {
+    drbokeh::layering::LayeringOptions {
+        max_layers: layers,
+        feather_px: 0,
+        ..Default::default()
+    }
+}
+
+fn fit_split(
+    aif: &Image<f32>,
+    d: &Image<f32>,
+    target: &Image<f32>,
+    s: &RenderSettings,
+    layers: usize,
+    iters: usize,
+) -> Split {
+    let (w, h) = (aif.width, aif.height);
+    let dec = drbokeh::layering::layers_from_disparity(aif, d, &split_opts(layers)).unwrap();
+    let owner = owner_of(&dec.thresholds, d);
+    let edge = edge_mask(&owner, w, h, 1);
+    // The neighbour of another owner: 4-neighbours first, then diagonals.
+    let offs: [(isize, isize); 8] = [
+        (1, 0),
+        (-1, 0),
+        (0, 1),
+        (0, -1),
+        (1, 1),
+        (-1, -1),
+        (1, -1),
+        (-1, 1),
+    ];
+    let nb: Vec<usize> = (0..w * h)
+        .map(|i| {
+            if !edge[i] {
+                return i;
+            }
+            let (x, y) = ((i % w) as isize, (i / w) as isize);
+            offs.iter()
+                .map(|&(dx, dy)| (x + dx, y + dy))
+                .filter(|&(xx, yy)| xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h)
+                .map(|(xx, yy)| yy as usize * w + xx as usize)
+                .find(|&q| owner[q] != owner[i])
+                .unwrap_or(i)
+        })
+        .collect();
+    let edge: Vec<bool> = (0..w * h).map(|i| edge[i] && nb[i] != i).collect();
+    let idx: Vec<usize> = (0..w * h).filter(|&i| edge[i]).collect();
+    let sig = |u: f32| 0.02 + 0.96 / (1.0 + (-u).exp());
+    // Parameters per pixel: u (coverage) and the own colour (3).
+    let mut u = vec![2.0f32; idx.len()];
+    let mut own: Vec<f32> = idx
+        .iter()
+        .flat_map(|&i| aif.data[3 * i..3 * i + 3].to_vec())
+        .collect();
+    let n = 4 * idx.len();
+    let (mut m, mut v) = (vec![0f32; n], vec![0f32; n]);
+    let (b1, b2, lr) = (0.9f32, 0.999f32, 0.02f32);
+    let mut split = Split {
+        edge,
+        nb,
+        cov: vec![0.0; w * h],
+        own: vec![0.0; 3 * w * h],
+    };
+    let base = dec.stack;
+    for t in 1..=iters + 1 {
+        for (j, &i) in idx.iter().enumerate() {
+            split.cov[i] = sig(u[j]);
+            split.own[3 * i..3 * i + 3].copy_from_slice(&own[3 * j..3 * j + 3]);
+        }
+        if t == iters + 1 {
+            break;
+        }
+        let mut stack = base.clone();
+        split.apply(&mut stack, &owner, &aif.data, 0, 0, w, h, w);
+        let (r, tape) =
+            drbokeh::render_with_tape_on(&stack, s, Engine::Fast, &drbokeh::NoProgress).unwrap();
+        let c = Image::from_vec(
+            r.width,
+            r.height,
+            3,
+            r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+        )
+        .unwrap();
+        let (_, g1) = drbokeh::loss::l1_grad(&c, target).unwrap();
+        let (_, g2) = drbokeh::loss::hssim_grad(&c, target).unwrap();
+        let g = Image::from_vec(
+            r.width,
+            r.height,
+            3,
+            (0..r.data.len())
+                .map(|q| {
+                    if (0.0..=1.0).contains(&r.data[q]) {
+                        0.5 * g1.data[q] + 10.0 * g2.data[q]
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+        )
+        .unwrap();
+        let grads = tape.backward(&g, &drbokeh::NoProgress).unwrap();
+        let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
+        let mut step = |q: usize, gr: f32, x: &mut f32| {
+            m[q] = b1 * m[q] + (1.0 - b1) * gr;
+            v[q] = b2 * v[q] + (1.0 - b2) * gr * gr;
+            *x -= lr * (m[q] / c1) / ((v[q] / c2).sqrt() + 1e-8);
+        };
+        for (j, &i) in idx.iter().enumerate() {
+            let (o1, o2) = (owner[i], owner[split.nb[i]]);
+            let sv = split.cov[i];
+            // The front layer's alpha is cov (own surface in front) or 1 - cov.
+            let (front, da_ds) = if o1 < o2 { (o1, 1.0) } else { (o2, -1.0) };
+            // The own colour sits in layer o1, the other colour in layer o2.
+            let (g_own, g_oth) = (&grads.layers[o1], &grads.layers[o2]);
+            let mut ds = da_ds * grads.layers[front].alpha.data[i];
+            let mut dp = [0f32; 3];
+            for c in 0..3 {
+                let ir = aif.data[3 * i + c];
+                let p = own[3 * j + c];
+                let go = g_oth.rgb.data[3 * i + c];
+                ds += go * (ir - p) / ((1.0 - sv) * (1.0 - sv));
+                dp[c] = g_own.rgb.data[3 * i + c] - go * sv / (1.0 - sv);
+            }
+            let du = ds * (sv - 0.02) * (0.98 - sv) / 0.96;
+            let mut x = u[j];
+            step(4 * j, du, &mut x);
+            u[j] = x;
+            // Keep both colours in [0, 1]: own in [(I - 1 + s) / s, I / s] (with the new s);
+            // where that is empty (an unclipped I above 1), both colours are I.
+            let sn = sig(u[j]);
+            for c in 0..3 {
+                let ir = aif.data[3 * i + c];
+                let mut x = own[3 * j + c];
+                step(4 * j + 1 + c, dp[c], &mut x);
+                let (lo, hi) = (((ir - 1.0 + sn) / sn).max(0.0), (ir / sn).min(1.0));
+                own[3 * j + c] = if lo <= hi { x.clamp(lo, hi) } else { ir };
+            }
+        }
+    }
+    split
+}
+
 fn median(mut v: Vec<f32>) -> f32 {
     v.sort_by(f32::total_cmp);
     v[v.len() / 2]
@@ -346,6 +564,7 @@ fn main() {
     let cguard: usize = get("cguard", "0").parse().unwrap();
     let pure: usize = get("pure", "0").parse().unwrap();
     let fit: usize = get("fit", "0").parse().unwrap();
+    let split: usize = get("split", "0").parse().unwrap();
     // src=exr: the judge renders the unclipped all-in-focus image (an oracle for the
     // highlights: aif.exr encoded as aif.png is, exact sRGB, but not clipped).
     let src = get("src", "png");
@@ -503,95 +722,114 @@ fn main() {
         };
         let t_fit = std::time::Instant::now();
         let fitted = (fit > 0).then(|| fit_edge_colours(&judge_aif, &est, target, &s, layers, fit));
-        if fit > 0 {
+        let splitfit = (split > 0).then(|| fit_split(&judge_aif, &est, target, &s, layers, split));
+        if fit > 0 || split > 0 {
             println!(
                 "  edge colours fitted in {:.1}s",
                 t_fit.elapsed().as_secs_f64()
             );
         }
-        let lossf =
-            |aif: &Image<f32>, d: &Image<f32>, tg: &Image<f32>, x0: usize, y0: usize| -> f64 {
-                let r = match judge.as_str() {
-                    "truelayers" => drbokeh::render(
-                        &stack_at(d, x0, y0),
-                        &s,
-                        Engine::Fast,
-                        &drbokeh::NoProgress,
-                    )
-                    .unwrap(),
-                    "layered" if fit > 0 => {
-                        // The decomposition at the proposal, with the fitted colours on the
-                        // pixels of the start's mixed edge, in whichever layer owns them now.
-                        let dec = drbokeh::layering::layers_from_disparity(
-                            aif,
-                            d,
-                            &drbokeh::layering::LayeringOptions {
-                                max_layers: layers,
-                                ..Default::default()
-                            },
-                        )
+        let lossf = |aif: &Image<f32>,
+                     d: &Image<f32>,
+                     tg: &Image<f32>,
+                     x0: usize,
+                     y0: usize|
+         -> f64 {
+            let r = match judge.as_str() {
+                "truelayers" => {
+                    drbokeh::render(&stack_at(d, x0, y0), &s, Engine::Fast, &drbokeh::NoProgress)
+                        .unwrap()
+                }
+                "layered" if split > 0 => {
+                    let dec = drbokeh::layering::layers_from_disparity(aif, d, &split_opts(layers))
                         .unwrap();
-                        let own = owner_of(&dec.thresholds, d);
-                        let mut st = dec.stack;
-                        let (edge, rgb) = fitted.as_ref().unwrap();
-                        for y in 0..d.height {
-                            for x in 0..d.width {
-                                let (j, g) = (y * d.width + x, (y0 + y) * w + x0 + x);
-                                if edge[g] {
-                                    st.layers[own[j]].rgb_encoded.data[3 * j..3 * j + 3]
-                                        .copy_from_slice(&rgb[3 * g..3 * g + 3]);
-                                }
+                    let own = owner_of(&dec.thresholds, d);
+                    let mut st = dec.stack;
+                    splitfit.as_ref().unwrap().apply(
+                        &mut st,
+                        &own,
+                        &judge_aif.data,
+                        x0,
+                        y0,
+                        d.width,
+                        d.height,
+                        w,
+                    );
+                    drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                }
+                "layered" if fit > 0 => {
+                    // The decomposition at the proposal, with the fitted colours on the
+                    // pixels of the start's mixed edge, in whichever layer owns them now.
+                    let dec = drbokeh::layering::layers_from_disparity(
+                        aif,
+                        d,
+                        &drbokeh::layering::LayeringOptions {
+                            max_layers: layers,
+                            ..Default::default()
+                        },
+                    )
+                    .unwrap();
+                    let own = owner_of(&dec.thresholds, d);
+                    let mut st = dec.stack;
+                    let (edge, rgb) = fitted.as_ref().unwrap();
+                    for y in 0..d.height {
+                        for x in 0..d.width {
+                            let (j, g) = (y * d.width + x, (y0 + y) * w + x0 + x);
+                            if edge[g] {
+                                st.layers[own[j]].rgb_encoded.data[3 * j..3 * j + 3]
+                                    .copy_from_slice(&rgb[3 * g..3 * g + 3]);
                             }
                         }
-                        drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
                     }
-                    "layered" if pure > 0 => {
-                        let dec = drbokeh::layering::layers_from_disparity(
-                            aif,
-                            d,
-                            &drbokeh::layering::LayeringOptions {
-                                max_layers: layers,
-                                ..Default::default()
-                            },
-                        )
-                        .unwrap();
-                        let st = purify(dec, aif, d, pure);
-                        drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
-                    }
-                    "layered" if matting > 0 || cguard > 0 => {
-                        // The decomposition with soft alpha at its cut edges (the photo
-                        // pipeline's edge matting) or fills that skip edge pixels, rendered
-                        // as it is.
-                        let opts = drbokeh::layering::LayeringOptions {
+                    drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                }
+                "layered" if pure > 0 => {
+                    let dec = drbokeh::layering::layers_from_disparity(
+                        aif,
+                        d,
+                        &drbokeh::layering::LayeringOptions {
                             max_layers: layers,
-                            matting_px: matting,
-                            colour_guard_px: cguard,
                             ..Default::default()
-                        };
-                        let st = drbokeh::layering::layers_from_disparity(aif, d, &opts)
-                            .unwrap()
-                            .stack;
-                        drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
-                    }
-                    "layered" => LayeredModel::decompose(aif, d, layers)
+                        },
+                    )
+                    .unwrap();
+                    let st = purify(dec, aif, d, pure);
+                    drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                }
+                "layered" if matting > 0 || cguard > 0 => {
+                    // The decomposition with soft alpha at its cut edges (the photo
+                    // pipeline's edge matting) or fills that skip edge pixels, rendered
+                    // as it is.
+                    let opts = drbokeh::layering::LayeringOptions {
+                        max_layers: layers,
+                        matting_px: matting,
+                        colour_guard_px: cguard,
+                        ..Default::default()
+                    };
+                    let st = drbokeh::layering::layers_from_disparity(aif, d, &opts)
                         .unwrap()
-                        .render(Engine::Fast, aif, d, &s)
-                        .unwrap(),
-                    "single" => {
-                        render_layer_on(RenderLayer::DrBokeh, Engine::Fast, aif, d, &s).unwrap()
-                    }
-                    _ => render_layer_on(est_layer, Engine::Fast, aif, d, &s).unwrap(),
-                };
-                let c = Image::from_vec(
-                    r.width,
-                    r.height,
-                    3,
-                    r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
-                )
-                .unwrap();
-                0.5 * drbokeh::loss::l1(&c, tg).unwrap() as f64
-                    + 10.0 * drbokeh::loss::hssim(&c, tg).unwrap() as f64
+                        .stack;
+                    drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
+                }
+                "layered" => LayeredModel::decompose(aif, d, layers)
+                    .unwrap()
+                    .render(Engine::Fast, aif, d, &s)
+                    .unwrap(),
+                "single" => {
+                    render_layer_on(RenderLayer::DrBokeh, Engine::Fast, aif, d, &s).unwrap()
+                }
+                _ => render_layer_on(est_layer, Engine::Fast, aif, d, &s).unwrap(),
             };
+            let c = Image::from_vec(
+                r.width,
+                r.height,
+                3,
+                r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+            )
+            .unwrap();
+            0.5 * drbokeh::loss::l1(&c, tg).unwrap() as f64
+                + 10.0 * drbokeh::loss::hssim(&c, tg).unwrap() as f64
+        };
         let seg = slic(&scene.aif, segpx, compact);
         let nseg = seg.iter().max().unwrap() + 1;
         let mut members = vec![Vec::new(); nseg];
