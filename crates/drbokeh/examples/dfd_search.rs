@@ -166,32 +166,11 @@ fn purify(
     use drbokeh::layering::Region;
     let (w, h) = (aif.width, aif.height);
     let owner = owner_of(&dec.thresholds, d);
+    let edge = edge_mask(&owner, w, h, r);
     let mut layers = dec.stack.layers;
     for (k, layer) in layers.iter_mut().enumerate() {
         // Interior: owned, and no pixel of another layer within r (Chebyshev).
-        let interior: Vec<bool> = (0..w * h)
-            .map(|i| {
-                if owner[i] != k {
-                    return false;
-                }
-                let (x, y) = ((i % w) as isize, (i / w) as isize);
-                let r = r as isize;
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        let (xx, yy) = (x + dx, y + dy);
-                        if xx >= 0
-                            && yy >= 0
-                            && (xx as usize) < w
-                            && (yy as usize) < h
-                            && owner[yy as usize * w + xx as usize] != k
-                        {
-                            return false;
-                        }
-                    }
-                }
-                true
-            })
-            .collect();
+        let interior: Vec<bool> = (0..w * h).map(|i| owner[i] == k && !edge[i]).collect();
         if !interior.iter().any(|&b| b) {
             continue;
         }
@@ -242,6 +221,42 @@ fn edge_mask(owner: &[usize], w: usize, h: usize, r: usize) -> Vec<bool> {
         .collect()
 }
 
+/// The gradients of the fits' loss (0.5 L1 + 10 HSSIM of the clamped render against
+/// `target`) with respect to every layer of `stack`.
+fn loss_gradients(
+    stack: &drbokeh::LayerStack<f32>,
+    s: &RenderSettings,
+    target: &Image<f32>,
+) -> drbokeh::Gradients<f32> {
+    let (r, tape) =
+        drbokeh::render_with_tape_on(stack, s, Engine::Fast, &drbokeh::NoProgress).unwrap();
+    let c = Image::from_vec(
+        r.width,
+        r.height,
+        3,
+        r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+    )
+    .unwrap();
+    let (_, g1) = drbokeh::loss::l1_grad(&c, target).unwrap();
+    let (_, g2) = drbokeh::loss::hssim_grad(&c, target).unwrap();
+    let g = Image::from_vec(
+        r.width,
+        r.height,
+        3,
+        (0..r.data.len())
+            .map(|q| {
+                if (0.0..=1.0).contains(&r.data[q]) {
+                    0.5 * g1.data[q] + 10.0 * g2.data[q]
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    )
+    .unwrap();
+    tape.backward(&g, &drbokeh::NoProgress).unwrap()
+}
+
 /// `fit=N`: the colours of the mixed edge pixels (owned pixels within 1 px of another
 /// layer) of the decomposition at `d`, fitted to the defocused image by `iters` Adam steps
 /// (learning rate 0.02, encoded colour in [0, 1]) on 0.5 L1 + 10 HSSIM of the clamped
@@ -275,33 +290,7 @@ fn fit_edge_colours(
             stack.layers[owner[i]].rgb_encoded.data[3 * i..3 * i + 3]
                 .copy_from_slice(&x[3 * j..3 * j + 3]);
         }
-        let (r, tape) =
-            drbokeh::render_with_tape_on(&stack, s, Engine::Fast, &drbokeh::NoProgress).unwrap();
-        let c = Image::from_vec(
-            r.width,
-            r.height,
-            3,
-            r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
-        )
-        .unwrap();
-        let (_, g1) = drbokeh::loss::l1_grad(&c, target).unwrap();
-        let (_, g2) = drbokeh::loss::hssim_grad(&c, target).unwrap();
-        let g = Image::from_vec(
-            r.width,
-            r.height,
-            3,
-            (0..r.data.len())
-                .map(|q| {
-                    if (0.0..=1.0).contains(&r.data[q]) {
-                        0.5 * g1.data[q] + 10.0 * g2.data[q]
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
-        )
-        .unwrap();
-        let grads = tape.backward(&g, &drbokeh::NoProgress).unwrap();
+        let grads = loss_gradients(&stack, s, target);
         let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
         for (j, &i) in idx.iter().enumerate() {
             for ch in 0..3 {
@@ -469,33 +458,7 @@ fn fit_split(
         }
         let mut stack = base.clone();
         split.apply(&mut stack, &owner, &aif.data, 0, 0, w, h, w);
-        let (r, tape) =
-            drbokeh::render_with_tape_on(&stack, s, Engine::Fast, &drbokeh::NoProgress).unwrap();
-        let c = Image::from_vec(
-            r.width,
-            r.height,
-            3,
-            r.data.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
-        )
-        .unwrap();
-        let (_, g1) = drbokeh::loss::l1_grad(&c, target).unwrap();
-        let (_, g2) = drbokeh::loss::hssim_grad(&c, target).unwrap();
-        let g = Image::from_vec(
-            r.width,
-            r.height,
-            3,
-            (0..r.data.len())
-                .map(|q| {
-                    if (0.0..=1.0).contains(&r.data[q]) {
-                        0.5 * g1.data[q] + 10.0 * g2.data[q]
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
-        )
-        .unwrap();
-        let grads = tape.backward(&g, &drbokeh::NoProgress).unwrap();
+        let grads = loss_gradients(&stack, s, target);
         let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
         let mut step = |q: usize, gr: f32, x: &mut f32| {
             m[q] = b1 * m[q] + (1.0 - b1) * gr;
@@ -729,6 +692,11 @@ fn main() {
                 t_fit.elapsed().as_secs_f64()
             );
         }
+        // The decomposition `judge=layered` makes (as `LayeredModel::decompose`).
+        let plain = drbokeh::layering::LayeringOptions {
+            max_layers: layers,
+            ..Default::default()
+        };
         let lossf = |aif: &Image<f32>,
                      d: &Image<f32>,
                      tg: &Image<f32>,
@@ -760,15 +728,7 @@ fn main() {
                 "layered" if fit > 0 => {
                     // The decomposition at the proposal, with the fitted colours on the
                     // pixels of the start's mixed edge, in whichever layer owns them now.
-                    let dec = drbokeh::layering::layers_from_disparity(
-                        aif,
-                        d,
-                        &drbokeh::layering::LayeringOptions {
-                            max_layers: layers,
-                            ..Default::default()
-                        },
-                    )
-                    .unwrap();
+                    let dec = drbokeh::layering::layers_from_disparity(aif, d, &plain).unwrap();
                     let own = owner_of(&dec.thresholds, d);
                     let mut st = dec.stack;
                     let (edge, rgb) = fitted.as_ref().unwrap();
@@ -784,15 +744,7 @@ fn main() {
                     drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
                 }
                 "layered" if pure > 0 => {
-                    let dec = drbokeh::layering::layers_from_disparity(
-                        aif,
-                        d,
-                        &drbokeh::layering::LayeringOptions {
-                            max_layers: layers,
-                            ..Default::default()
-                        },
-                    )
-                    .unwrap();
+                    let dec = drbokeh::layering::layers_from_disparity(aif, d, &plain).unwrap();
                     let st = purify(dec, aif, d, pure);
                     drbokeh::render(&st, &s, Engine::Fast, &drbokeh::NoProgress).unwrap()
                 }
