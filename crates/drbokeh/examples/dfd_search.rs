@@ -14,7 +14,8 @@
 //! decomposition's cut edges, `LayeringOptions::matting_px`), `cguard=PX` (judge=layered:
 //! hidden colours filled from pixels at least PX from another layer), `pure=PX`
 //! (judge=layered: see [`purify`]), `fit=N` (judge=layered: see [`fit_edge_colours`]),
-//! `split=N` (judge=layered: see [`Split`]),
+//! `split=N` (judge=layered: see [`Split`]), `pixel=N` (N passes of one-pixel boundary moves
+//! after the segment sweeps; `sweeps=0` for these alone),
 //! `talpha=hard` and
 //! `tcolour=fill|aif|aifown`, `recut=1` (judge=truelayers: the true layers degraded towards what
 //! a decomposition has; see the comments at `talpha` and `recut`).
@@ -805,6 +806,19 @@ fn main() {
             .map(|&v| (v as f64 - scene.focus).abs())
             .fold(0.0, f64::max);
         let reach = (scene.blur_k * dmax.max(0.05)).ceil() as usize + 2;
+        // The crop a change of the pixels a..=b (along one axis of length n) can reach, at
+        // least 40 px (HSSIM's largest window is 31).
+        let grow = |a: usize, b: usize, n: usize| {
+            let lo = a.saturating_sub(2 * reach);
+            let hi = (b + 2 * reach + 1).min(n);
+            let lo = if hi - lo < 40 {
+                hi.saturating_sub(40)
+            } else {
+                lo
+            };
+            let hi = if hi - lo < 40 { (lo + 40).min(n) } else { hi };
+            (lo, hi)
+        };
         let mut kept = 0;
         let mut tried = 0;
         for _ in 0..sweeps {
@@ -830,18 +844,6 @@ fn main() {
                     y0 = y0.min(i / w);
                     y1 = y1.max(i / w);
                 }
-                let grow = |a: usize, b: usize, n: usize| {
-                    let lo = a.saturating_sub(2 * reach);
-                    let hi = (b + 2 * reach + 1).min(n);
-                    // at least 40 px (HSSIM's largest window is 31)
-                    let lo = if hi - lo < 40 {
-                        hi.saturating_sub(40)
-                    } else {
-                        lo
-                    };
-                    let hi = if hi - lo < 40 { (lo + 40).min(n) } else { hi };
-                    (lo, hi)
-                };
                 let (cx0, cx1) = grow(x0, x1, w);
                 let (cy0, cy1) = grow(y0, y1, h);
                 let (cw, ch) = (cx1 - cx0, cy1 - cy0);
@@ -868,6 +870,79 @@ fn main() {
                         cur.data[i] = c;
                     }
                 }
+            }
+        }
+        // pixel=N: after the segment sweeps, up to N passes of one-pixel moves along the
+        // boundaries (a pixel whose 4-neighbour differs by more than `mindiff` is proposed
+        // that neighbour's value, kept where the judge's loss on the crop falls), so that
+        // a boundary can move a pixel at a time where moving whole segments cannot.
+        let pixel_passes: usize = get("pixel", "0").parse().unwrap();
+        if pixel_passes > 0 {
+            println!(
+                "  segment search done: MAE {:.4} ({:.0}s)",
+                disparity_errors(&cur, &scene.disparity).mae,
+                t0.elapsed().as_secs_f64()
+            );
+        }
+        for pass in 0..pixel_passes {
+            let mut moved = 0;
+            let mut proposed = 0;
+            for i in 0..w * h {
+                let (x, y) = (i % w, i / w);
+                let v = cur.data[i];
+                let mut cands: Vec<f32> = Vec::new();
+                let nb = [
+                    (x > 0).then(|| i - 1),
+                    (x + 1 < w).then(|| i + 1),
+                    (y > 0).then(|| i - w),
+                    (y + 1 < h).then(|| i + w),
+                ];
+                for n in nb.into_iter().flatten() {
+                    let m = cur.data[n];
+                    if (m - v).abs() > mindiff && cands.iter().all(|c| (c - m).abs() > mindiff) {
+                        cands.push(m);
+                    }
+                }
+                if cands.is_empty() {
+                    continue;
+                }
+                proposed += 1;
+                if proposed % 2000 == 0 {
+                    eprintln!(
+                        "  pixel pass {pass}: {proposed} proposed, {moved} moved, MAE {:.4} ({:.0}s)",
+                        disparity_errors(&cur, &scene.disparity).mae,
+                        t0.elapsed().as_secs_f64()
+                    );
+                }
+                let (cx0, cx1) = grow(x, x, w);
+                let (cy0, cy1) = grow(y, y, h);
+                let (cw, ch) = (cx1 - cx0, cy1 - cy0);
+                let a = crop(&judge_aif, cx0, cy0, cw, ch);
+                let tg = crop(target, cx0, cy0, cw, ch);
+                let mut d = crop(&cur, cx0, cy0, cw, ch);
+                let base = lossf(&a, &d, &tg, cx0, cy0);
+                let mut best = (base * (1.0 - gain), None);
+                let j = (y - cy0) * cw + x - cx0;
+                for &c in &cands {
+                    d.data[j] = c;
+                    let l = lossf(&a, &d, &tg, cx0, cy0);
+                    if l < best.0 {
+                        best = (l, Some(c));
+                    }
+                }
+                if let Some(c) = best.1 {
+                    moved += 1;
+                    cur.data[i] = c;
+                }
+            }
+            let e = disparity_errors(&cur, &scene.disparity);
+            println!(
+                "  pixel pass {pass}: {proposed} boundary pixels, {moved} moved, MAE {:.4} ({:.0}s)",
+                e.mae,
+                t0.elapsed().as_secs_f64()
+            );
+            if moved == 0 {
+                break;
             }
         }
         // The judge's loss on the whole image at the start, at the search's result and at
