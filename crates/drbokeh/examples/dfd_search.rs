@@ -39,6 +39,18 @@ fn crop(img: &Image<f32>, x0: usize, y0: usize, w: usize, h: usize) -> Image<f32
     Image::from_vec(w, h, c, data).unwrap()
 }
 
+/// The values of `values` that differ from `from` and from each other by more than
+/// `mindiff`, in order: the moves a search proposes.
+fn distinct_moves(from: f32, values: impl Iterator<Item = f32>, mindiff: f32) -> Vec<f32> {
+    let mut cands: Vec<f32> = Vec::new();
+    for m in values {
+        if (m - from).abs() > mindiff && cands.iter().all(|c| (c - m).abs() > mindiff) {
+            cands.push(m);
+        }
+    }
+    cands
+}
+
 /// SLIC superpixels of an RGB image in [0, 1]; returns one label per pixel, connected.
 fn slic(img: &Image<f32>, step: usize, compactness: f32) -> Vec<usize> {
     let (w, h) = (img.width, img.height);
@@ -819,6 +831,41 @@ fn main() {
             let hi = if hi - lo < 40 { (lo + 40).min(n) } else { hi };
             (lo, hi)
         };
+        // The best of `cands` for the pixels `pixels` (all set to one value), judged on the
+        // crop every pixel the change can reach lies in; `None` where none lowers the loss
+        // by the fraction `gain`. The one move of both searches.
+        let best_move = |cur: &Image<f32>, pixels: &[usize], cands: &[f32]| -> Option<f32> {
+            if cands.is_empty() {
+                return None;
+            }
+            let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
+            for &i in pixels {
+                x0 = x0.min(i % w);
+                x1 = x1.max(i % w);
+                y0 = y0.min(i / w);
+                y1 = y1.max(i / w);
+            }
+            let (cx0, cx1) = grow(x0, x1, w);
+            let (cy0, cy1) = grow(y0, y1, h);
+            let (cw, ch) = (cx1 - cx0, cy1 - cy0);
+            let a = crop(&judge_aif, cx0, cy0, cw, ch);
+            let tg = crop(target, cx0, cy0, cw, ch);
+            let base_d = crop(cur, cx0, cy0, cw, ch);
+            let base = lossf(&a, &base_d, &tg, cx0, cy0);
+            let mut best = (base * (1.0 - gain), None);
+            for &c in cands {
+                let mut d = base_d.clone();
+                for &i in pixels {
+                    let (x, y) = (i % w - cx0, i / w - cy0);
+                    d.data[y * cw + x] = c;
+                }
+                let l = lossf(&a, &d, &tg, cx0, cy0);
+                if l < best.0 {
+                    best = (l, Some(c));
+                }
+            }
+            best.1
+        };
         let mut kept = 0;
         let mut tried = 0;
         for _ in 0..sweeps {
@@ -827,44 +874,15 @@ fn main() {
                     continue;
                 }
                 let med = median(members[k].iter().map(|&i| cur.data[i]).collect());
-                let mut cands: Vec<f32> = Vec::new();
-                for &n in &nbrs[k] {
-                    let m = median(members[n].iter().map(|&i| cur.data[i]).collect());
-                    if (m - med).abs() > mindiff && cands.iter().all(|c| (c - m).abs() > mindiff) {
-                        cands.push(m);
-                    }
-                }
-                if cands.is_empty() {
-                    continue;
-                }
-                let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
-                for &i in &members[k] {
-                    x0 = x0.min(i % w);
-                    x1 = x1.max(i % w);
-                    y0 = y0.min(i / w);
-                    y1 = y1.max(i / w);
-                }
-                let (cx0, cx1) = grow(x0, x1, w);
-                let (cy0, cy1) = grow(y0, y1, h);
-                let (cw, ch) = (cx1 - cx0, cy1 - cy0);
-                let a = crop(&judge_aif, cx0, cy0, cw, ch);
-                let tg = crop(target, cx0, cy0, cw, ch);
-                let base_d = crop(&cur, cx0, cy0, cw, ch);
-                let base = lossf(&a, &base_d, &tg, cx0, cy0);
-                let mut best = (base * (1.0 - gain), None);
-                for &c in &cands {
-                    tried += 1;
-                    let mut d = base_d.clone();
-                    for &i in &members[k] {
-                        let (x, y) = (i % w - cx0, i / w - cy0);
-                        d.data[y * cw + x] = c;
-                    }
-                    let l = lossf(&a, &d, &tg, cx0, cy0);
-                    if l < best.0 {
-                        best = (l, Some(c));
-                    }
-                }
-                if let Some(c) = best.1 {
+                let cands = distinct_moves(
+                    med,
+                    nbrs[k]
+                        .iter()
+                        .map(|&n| median(members[n].iter().map(|&i| cur.data[i]).collect())),
+                    mindiff,
+                );
+                tried += cands.len();
+                if let Some(c) = best_move(&cur, &members[k], &cands) {
                     kept += 1;
                     for &i in &members[k] {
                         cur.data[i] = c;
@@ -889,20 +907,17 @@ fn main() {
             let mut proposed = 0;
             for i in 0..w * h {
                 let (x, y) = (i % w, i / w);
-                let v = cur.data[i];
-                let mut cands: Vec<f32> = Vec::new();
                 let nb = [
                     (x > 0).then(|| i - 1),
                     (x + 1 < w).then(|| i + 1),
                     (y > 0).then(|| i - w),
                     (y + 1 < h).then(|| i + w),
                 ];
-                for n in nb.into_iter().flatten() {
-                    let m = cur.data[n];
-                    if (m - v).abs() > mindiff && cands.iter().all(|c| (c - m).abs() > mindiff) {
-                        cands.push(m);
-                    }
-                }
+                let cands = distinct_moves(
+                    cur.data[i],
+                    nb.into_iter().flatten().map(|n| cur.data[n]),
+                    mindiff,
+                );
                 if cands.is_empty() {
                     continue;
                 }
@@ -914,23 +929,7 @@ fn main() {
                         t0.elapsed().as_secs_f64()
                     );
                 }
-                let (cx0, cx1) = grow(x, x, w);
-                let (cy0, cy1) = grow(y, y, h);
-                let (cw, ch) = (cx1 - cx0, cy1 - cy0);
-                let a = crop(&judge_aif, cx0, cy0, cw, ch);
-                let tg = crop(target, cx0, cy0, cw, ch);
-                let mut d = crop(&cur, cx0, cy0, cw, ch);
-                let base = lossf(&a, &d, &tg, cx0, cy0);
-                let mut best = (base * (1.0 - gain), None);
-                let j = (y - cy0) * cw + x - cx0;
-                for &c in &cands {
-                    d.data[j] = c;
-                    let l = lossf(&a, &d, &tg, cx0, cy0);
-                    if l < best.0 {
-                        best = (l, Some(c));
-                    }
-                }
-                if let Some(c) = best.1 {
+                if let Some(c) = best_move(&cur, &[i], &cands) {
                     moved += 1;
                     cur.data[i] = c;
                 }
