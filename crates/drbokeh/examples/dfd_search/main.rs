@@ -18,12 +18,16 @@
 //! after the segment sweeps; `sweeps=0` for these alone), `rounds=R` (R rounds of the
 //! searches; with `fit=N` or `split=N` the colours are fitted again at each round's start,
 //! so that they belong to the current estimate's cuts, not only to the first estimate's),
+//! `colsplit=1` (each round starts with the colour-split region moves of [`regions`];
+//! `cstol` the regions' tolerance (negative: -N, the connected pieces of the layers of a
+//! decomposition into at most N layers), `csq` the quantile of the values around proposed),
 //! `talpha=hard` and
 //! `tcolour=fill|aif|aifown`, `recut=1` (judge=truelayers: the true layers degraded towards what
 //! a decomposition has; see the comments at `talpha` and `recut`).
 mod edges;
 mod judge;
 mod oracle;
+mod regions;
 mod search;
 mod segments;
 
@@ -65,6 +69,9 @@ fn main() {
     let split = num("split", "0") as usize;
     let pixel_passes = num("pixel", "0") as usize;
     let rounds = (num("rounds", "1") as usize).max(1);
+    let colsplit = get("colsplit", "0") == "1";
+    let cstol = num("cstol", "0.05") as f32;
+    let csq = num("csq", "0.5") as f32;
     // src=exr: the judge renders the unclipped all-in-focus image (an oracle for the
     // highlights: aif.exr encoded as aif.png is, exact sRGB, but not clipped).
     let src = get("src", "png");
@@ -152,6 +159,17 @@ fn main() {
                 gain,
                 mindiff,
             };
+            if colsplit {
+                let r = regions::colour_split(&search, &scene.aif, &mut cur, cstol, 40, csq);
+                println!(
+                    "  round {round}: colour split: {} regions, {} proposed, {} kept, MAE {:.4} ({:.0}s)",
+                    r.regions,
+                    r.proposed,
+                    r.kept,
+                    disparity_errors(&cur, truth).mae,
+                    t0.elapsed().as_secs_f64()
+                );
+            }
             let (t, k) = search.segments(&mut cur, &segs, sweeps);
             tried += t;
             kept += k;

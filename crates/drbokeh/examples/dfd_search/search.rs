@@ -42,6 +42,19 @@ impl Search<'_> {
         if cands.is_empty() {
             return None;
         }
+        let (base, losses) = self.losses(cur, pixels, cands);
+        let mut best = (base * (1.0 - self.gain), None);
+        for (&c, l) in cands.iter().zip(losses) {
+            if l < best.0 {
+                best = (l, Some(c));
+            }
+        }
+        best.1
+    }
+
+    /// The loss of the crop that setting `pixels` to a value can reach: as it is, and with
+    /// the pixels set to each of `cands`.
+    pub fn losses(&self, cur: &Image<f32>, pixels: &[usize], cands: &[f32]) -> (f64, Vec<f64>) {
         let (w, h) = (cur.width, cur.height);
         let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
         for &i in pixels {
@@ -57,19 +70,18 @@ impl Search<'_> {
         let tg = crop(self.target, cx0, cy0, cw, ch);
         let base_d = crop(cur, cx0, cy0, cw, ch);
         let base = self.judge.loss(&a, &base_d, &tg, cx0, cy0);
-        let mut best = (base * (1.0 - self.gain), None);
-        for &c in cands {
-            let mut d = base_d.clone();
-            for &i in pixels {
-                let (x, y) = (i % w - cx0, i / w - cy0);
-                d.data[y * cw + x] = c;
-            }
-            let l = self.judge.loss(&a, &d, &tg, cx0, cy0);
-            if l < best.0 {
-                best = (l, Some(c));
-            }
-        }
-        best.1
+        let losses = cands
+            .iter()
+            .map(|&c| {
+                let mut d = base_d.clone();
+                for &i in pixels {
+                    let (x, y) = (i % w - cx0, i / w - cy0);
+                    d.data[y * cw + x] = c;
+                }
+                self.judge.loss(&a, &d, &tg, cx0, cy0)
+            })
+            .collect();
+        (base, losses)
     }
 
     /// `sweeps` passes over the segments: each is proposed the median of each neighbour
