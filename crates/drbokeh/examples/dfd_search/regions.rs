@@ -7,7 +7,7 @@
 //! farther pixels around the region (what the gaps would show); the better proposal is
 //! kept where the judge's loss on the crop falls.
 use crate::search::Search;
-use crate::segments::median;
+use crate::segments::{median, neighbours4};
 
 use drbokeh::Image;
 
@@ -18,8 +18,14 @@ pub struct RegionReport {
     pub kept: usize,
 }
 
-/// The 4-connected regions of equal `label`, at least `min_px` pixels each.
-fn label_regions(label: &[usize], w: usize, h: usize, min_px: usize) -> Vec<Vec<usize>> {
+/// The 4-connected regions grown from each seed pixel `s` over the pixels `n` for which
+/// `joins(s, n)`, at least `min_px` pixels each.
+fn flood(
+    w: usize,
+    h: usize,
+    min_px: usize,
+    joins: impl Fn(usize, usize) -> bool,
+) -> Vec<Vec<usize>> {
     let mut seen = vec![false; w * h];
     let mut out = Vec::new();
     for s in 0..w * h {
@@ -32,15 +38,8 @@ fn label_regions(label: &[usize], w: usize, h: usize, min_px: usize) -> Vec<Vec<
         while k < members.len() {
             let i = members[k];
             k += 1;
-            let (x, y) = (i % w, i / w);
-            let nb = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < w).then(|| i + 1),
-                (y > 0).then(|| i - w),
-                (y + 1 < h).then(|| i + w),
-            ];
-            for n in nb.into_iter().flatten() {
-                if !seen[n] && label[n] == label[s] {
+            for n in neighbours4(i, w, h) {
+                if !seen[n] && joins(s, n) {
                     seen[n] = true;
                     members.push(n);
                 }
@@ -50,44 +49,6 @@ fn label_regions(label: &[usize], w: usize, h: usize, min_px: usize) -> Vec<Vec<
             out.push(members);
         }
     }
-    out
-}
-
-/// The 4-connected regions of `d` grown from a seed pixel over values within `tol` of the
-/// seed's (so that a smooth ramp does not chain into one region), at least `min_px` pixels
-/// each.
-fn regions(d: &Image<f32>, tol: f32, min_px: usize) -> Vec<Vec<usize>> {
-    let (w, h) = (d.width, d.height);
-    let mut label = vec![usize::MAX; w * h];
-    let mut out = Vec::new();
-    for s in 0..w * h {
-        if label[s] != usize::MAX {
-            continue;
-        }
-        let id = out.len();
-        let mut members = vec![s];
-        label[s] = id;
-        let mut k = 0;
-        while k < members.len() {
-            let i = members[k];
-            k += 1;
-            let (x, y) = (i % w, i / w);
-            let nb = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < w).then(|| i + 1),
-                (y > 0).then(|| i - w),
-                (y + 1 < h).then(|| i + w),
-            ];
-            for n in nb.into_iter().flatten() {
-                if label[n] == usize::MAX && (d.data[n] - d.data[s]).abs() < tol {
-                    label[n] = id;
-                    members.push(n);
-                }
-            }
-        }
-        out.push(members);
-    }
-    out.retain(|m| m.len() >= min_px);
     out
 }
 
@@ -148,16 +109,18 @@ pub fn colour_split(
 ) -> RegionReport {
     let (w, h) = (cur.width, cur.height);
     // tol < 0: the regions are the connected pieces of the layers of the decomposition of
-    // `cur` into at most -tol layers (its cuts), not value-tolerance regions.
+    // `cur` into at most -tol layers (its cuts); else regions grown from a seed over values
+    // within `tol` of the seed's (so that a smooth ramp does not chain into one region).
     let mut regs = if tol < 0.0 {
         let opts = drbokeh::layering::LayeringOptions {
             max_layers: (-tol) as usize,
             ..Default::default()
         };
         let dec = drbokeh::layering::layers_from_disparity(aif, cur, &opts).unwrap();
-        label_regions(&crate::edges::owner_of(&dec.thresholds, cur), w, h, min_px)
+        let owner = crate::edges::owner_of(&dec.thresholds, cur);
+        flood(w, h, min_px, |s, n| owner[n] == owner[s])
     } else {
-        regions(cur, tol, min_px)
+        flood(w, h, min_px, |s, n| (cur.data[n] - cur.data[s]).abs() < tol)
     };
     regs.sort_by_key(|r| std::cmp::Reverse(r.len()));
     let mut report = RegionReport {
@@ -174,14 +137,7 @@ pub fn colour_split(
         // The farther pixels just outside the region.
         let mut around = Vec::new();
         for &i in reg {
-            let (x, y) = (i % w, i / w);
-            let nb = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < w).then(|| i + 1),
-                (y > 0).then(|| i - w),
-                (y + 1 < h).then(|| i + w),
-            ];
-            for n in nb.into_iter().flatten() {
+            for n in neighbours4(i, w, h) {
                 if !inside[n] && cur.data[n] < level - search.mindiff {
                     around.push(cur.data[n]);
                 }

@@ -2,7 +2,7 @@
 //! to a neighbour's value, each move kept where the judge's loss on the crop it can reach
 //! falls.
 use crate::judge::Judge;
-use crate::segments::{crop, distinct_moves, median, Segments};
+use crate::segments::{crop, distinct_moves, median, neighbours4, Segments};
 use drbokeh::dfd::disparity_errors;
 use drbokeh::Image;
 use std::time::Instant;
@@ -122,16 +122,9 @@ impl Search<'_> {
         for pass in 0..passes {
             let (mut moved, mut proposed) = (0, 0);
             for i in 0..w * h {
-                let (x, y) = (i % w, i / w);
-                let nb = [
-                    (x > 0).then(|| i - 1),
-                    (x + 1 < w).then(|| i + 1),
-                    (y > 0).then(|| i - w),
-                    (y + 1 < h).then(|| i + w),
-                ];
                 let cands = distinct_moves(
                     cur.data[i],
-                    nb.into_iter().flatten().map(|n| cur.data[n]),
+                    neighbours4(i, w, h).map(|n| cur.data[n]),
                     self.mindiff,
                 );
                 if cands.is_empty() {

@@ -25,6 +25,19 @@ pub fn distinct_moves(from: f32, values: impl Iterator<Item = f32>, mindiff: f32
     cands
 }
 
+/// The 4-neighbours of pixel `i` of a `w` x `h` image: left, right, up, down.
+pub fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = (i % w, i / w);
+    [
+        (x > 0).then(|| i - 1),
+        (x + 1 < w).then(|| i + 1),
+        (y > 0).then(|| i - w),
+        (y + 1 < h).then(|| i + w),
+    ]
+    .into_iter()
+    .flatten()
+}
+
 /// SLIC superpixels of an RGB image in [0, 1]; returns one label per pixel, connected.
 pub fn slic(img: &Image<f32>, step: usize, compactness: f32) -> Vec<usize> {
     let (w, h) = (img.width, img.height);
