@@ -49,6 +49,54 @@ pub fn owner_of(thresholds: &[f64], d: &Image<f32>) -> Vec<usize> {
         .collect()
 }
 
+/// The decomposition of `aif` cut at the disparity `d` (its stack) and each pixel's owning
+/// layer in it.
+pub fn cut(
+    aif: &Image<f32>,
+    d: &Image<f32>,
+    opts: &drbokeh::layering::LayeringOptions,
+) -> (drbokeh::LayerStack<f32>, Vec<usize>) {
+    let dec = drbokeh::layering::layers_from_disparity(aif, d, opts).unwrap();
+    let owner = owner_of(&dec.thresholds, d);
+    (dec.stack, owner)
+}
+
+/// Adam (beta 0.9 / 0.999, learning rate 0.02) over `n` parameters: the fits' optimiser.
+struct Adam {
+    m: Vec<f32>,
+    v: Vec<f32>,
+    c1: f32,
+    c2: f32,
+}
+
+impl Adam {
+    const B1: f32 = 0.9;
+    const B2: f32 = 0.999;
+    const LR: f32 = 0.02;
+
+    fn new(n: usize) -> Self {
+        Adam {
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            c1: 1.0,
+            c2: 1.0,
+        }
+    }
+
+    /// Starts step `t` (from 1): the moments' bias corrections.
+    fn begin(&mut self, t: usize) {
+        self.c1 = 1.0 - Self::B1.powi(t as i32);
+        self.c2 = 1.0 - Self::B2.powi(t as i32);
+    }
+
+    /// Moves parameter `q`, value `x`, along its gradient `g`.
+    fn step(&mut self, q: usize, g: f32, x: &mut f32) {
+        self.m[q] = Self::B1 * self.m[q] + (1.0 - Self::B1) * g;
+        self.v[q] = Self::B2 * self.v[q] + (1.0 - Self::B2) * g * g;
+        *x -= Self::LR * (self.m[q] / self.c1) / ((self.v[q] / self.c2).sqrt() + 1e-8);
+    }
+}
+
 /// Owned pixels with a pixel of another owner within `r` (Chebyshev): the mixed edge.
 pub fn edge_mask(owner: &[usize], w: usize, h: usize, r: usize) -> Vec<bool> {
     let r = r as isize;
@@ -126,31 +174,26 @@ pub fn fit_edge_colours(
         max_layers: layers,
         ..Default::default()
     };
-    let dec = drbokeh::layering::layers_from_disparity(aif, d, &opts).unwrap();
-    let owner = owner_of(&dec.thresholds, d);
+    let (mut stack, owner) = cut(aif, d, &opts);
     let edge = edge_mask(&owner, w, h, 1);
-    let mut stack = dec.stack;
     let idx: Vec<usize> = (0..w * h).filter(|&i| edge[i]).collect();
     let mut x: Vec<f32> = idx
         .iter()
         .flat_map(|&i| stack.layers[owner[i]].rgb_encoded.data[3 * i..3 * i + 3].to_vec())
         .collect();
-    let (mut m, mut v) = (vec![0f32; x.len()], vec![0f32; x.len()]);
-    let (b1, b2, lr) = (0.9f32, 0.999f32, 0.02f32);
+    let mut adam = Adam::new(x.len());
     for t in 1..=iters {
         for (j, &i) in idx.iter().enumerate() {
             stack.layers[owner[i]].rgb_encoded.data[3 * i..3 * i + 3]
                 .copy_from_slice(&x[3 * j..3 * j + 3]);
         }
         let grads = loss_gradients(&stack, s, target);
-        let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
+        adam.begin(t);
         for (j, &i) in idx.iter().enumerate() {
             for ch in 0..3 {
                 let q = 3 * j + ch;
-                let gr = grads.layers[owner[i]].rgb.data[3 * i + ch];
-                m[q] = b1 * m[q] + (1.0 - b1) * gr;
-                v[q] = b2 * v[q] + (1.0 - b2) * gr * gr;
-                x[q] = (x[q] - lr * (m[q] / c1) / ((v[q] / c2).sqrt() + 1e-8)).clamp(0.0, 1.0);
+                adam.step(q, grads.layers[owner[i]].rgb.data[3 * i + ch], &mut x[q]);
+                x[q] = x[q].clamp(0.0, 1.0);
             }
         }
     }
@@ -253,8 +296,7 @@ pub fn fit_split(
     iters: usize,
 ) -> Split {
     let (w, h) = (aif.width, aif.height);
-    let dec = drbokeh::layering::layers_from_disparity(aif, d, &split_opts(layers)).unwrap();
-    let owner = owner_of(&dec.thresholds, d);
+    let (base, owner) = cut(aif, d, &split_opts(layers));
     let edge = edge_mask(&owner, w, h, 1);
     // The neighbour of another owner: 4-neighbours first, then diagonals.
     let offs: [(isize, isize); 8] = [
@@ -291,15 +333,13 @@ pub fn fit_split(
         .flat_map(|&i| aif.data[3 * i..3 * i + 3].to_vec())
         .collect();
     let n = 4 * idx.len();
-    let (mut m, mut v) = (vec![0f32; n], vec![0f32; n]);
-    let (b1, b2, lr) = (0.9f32, 0.999f32, 0.02f32);
+    let mut adam = Adam::new(n);
     let mut split = Split {
         edge,
         nb,
         cov: vec![0.0; w * h],
         own: vec![0.0; 3 * w * h],
     };
-    let base = dec.stack;
     for t in 1..=iters + 1 {
         for (j, &i) in idx.iter().enumerate() {
             split.cov[i] = sig(u[j]);
@@ -311,12 +351,7 @@ pub fn fit_split(
         let mut stack = base.clone();
         split.apply(&mut stack, &owner, &aif.data, 0, 0, w, h, w);
         let grads = loss_gradients(&stack, s, target);
-        let (c1, c2) = (1.0 - b1.powi(t as i32), 1.0 - b2.powi(t as i32));
-        let mut step = |q: usize, gr: f32, x: &mut f32| {
-            m[q] = b1 * m[q] + (1.0 - b1) * gr;
-            v[q] = b2 * v[q] + (1.0 - b2) * gr * gr;
-            *x -= lr * (m[q] / c1) / ((v[q] / c2).sqrt() + 1e-8);
-        };
+        adam.begin(t);
         for (j, &i) in idx.iter().enumerate() {
             let (o1, o2) = (owner[i], owner[split.nb[i]]);
             let sv = split.cov[i];
@@ -335,7 +370,7 @@ pub fn fit_split(
             }
             let du = ds * (sv - 0.02) * (0.98 - sv) / 0.96;
             let mut x = u[j];
-            step(4 * j, du, &mut x);
+            adam.step(4 * j, du, &mut x);
             u[j] = x;
             // Keep both colours in [0, 1]: own in [(I - 1 + s) / s, I / s] (with the new s);
             // where that is empty (an unclipped I above 1), both colours are I.
@@ -343,7 +378,7 @@ pub fn fit_split(
             for c in 0..3 {
                 let ir = aif.data[3 * i + c];
                 let mut x = own[3 * j + c];
-                step(4 * j + 1 + c, dp[c], &mut x);
+                adam.step(4 * j + 1 + c, dp[c], &mut x);
                 let (lo, hi) = (((ir - 1.0 + sn) / sn).max(0.0), (ir / sn).min(1.0));
                 own[3 * j + c] = if lo <= hi { x.clamp(lo, hi) } else { ir };
             }

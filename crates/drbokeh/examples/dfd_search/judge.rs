@@ -1,6 +1,6 @@
 //! The judges: the loss a proposal is kept or dropped by, 0.5 L1 + 10 HSSIM of the clamped
 //! render of a crop against the same crop of the traced defocused image.
-use crate::edges::{owner_of, purify, split_opts, Split};
+use crate::edges::{cut, purify, split_opts, Split};
 use crate::oracle::TrueLayers;
 use drbokeh::dfd::layered::LayeredModel;
 use drbokeh::dfd::{render_layer_on, RenderLayer};
@@ -32,6 +32,11 @@ pub struct Judge<'a> {
 }
 
 impl Judge<'_> {
+    /// The loss of the whole image at the disparity `d`.
+    pub fn whole(&self, d: &Image<f32>, target: &Image<f32>) -> f64 {
+        self.loss(&self.aif, d, target, 0, 0)
+    }
+
     /// The loss of the crop at `x0, y0` rendered from `aif` (that crop of [`Judge::aif`])
     /// at the disparity `d`, against `target` (the same crop of the defocused image).
     pub fn loss(
@@ -49,9 +54,7 @@ impl Judge<'_> {
         let r = match self.kind.as_str() {
             "truelayers" => render(&self.truth.as_ref().unwrap().stack_at(d, x0, y0)),
             "layered" if self.split.is_some() => {
-                let dec = layers_from_disparity(aif, d, &split_opts(self.layers)).unwrap();
-                let own = owner_of(&dec.thresholds, d);
-                let mut st = dec.stack;
+                let (mut st, own) = cut(aif, d, &split_opts(self.layers));
                 self.split.as_ref().unwrap().apply(
                     &mut st,
                     &own,
@@ -67,9 +70,7 @@ impl Judge<'_> {
             "layered" if self.fitted.is_some() => {
                 // The decomposition at the proposal, with the fitted colours on the pixels
                 // of the start's mixed edge, in whichever layer owns them now.
-                let dec = layers_from_disparity(aif, d, &self.plain()).unwrap();
-                let own = owner_of(&dec.thresholds, d);
-                let mut st = dec.stack;
+                let (mut st, own) = cut(aif, d, &self.plain());
                 let (edge, rgb) = self.fitted.as_ref().unwrap();
                 for y in 0..d.height {
                     for x in 0..d.width {

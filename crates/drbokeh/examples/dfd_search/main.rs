@@ -139,6 +139,7 @@ fn main() {
         let reach_px = (scene.blur_k * dmax.max(0.05)).ceil() as usize + 2;
         let mut cur = est.clone();
         let (mut tried, mut kept) = (0, 0);
+        let mut losses = (0.0, 0.0, 0.0);
         for round in 0..rounds {
             // The colours are fitted at the round's start, to the current estimate's cuts.
             if fit > 0 || split > 0 {
@@ -181,23 +182,26 @@ fn main() {
                 );
                 search.pixels(&mut cur, pixel_passes, truth, t0);
             }
+            // The round's judge on the whole image at the start, at the search's result
+            // and at the true disparity: which of the three the objective ranks first.
+            // (The last round's are the ones printed below.)
+            losses = (
+                judge.whole(&est, target),
+                judge.whole(&cur, target),
+                judge.whole(truth, target),
+            );
             if rounds > 1 {
-                // The round's judge on the whole image: at the start, now, at the truth.
-                let whole = |d: &Image<f32>| judge.loss(&judge.aif, d, target, 0, 0);
                 println!(
                     "  round {round}: MAE {:.4}, {k} of {t} moves kept, loss start {:.4} now {:.4} truth {:.4} ({:.0}s)",
                     disparity_errors(&cur, truth).mae,
-                    whole(&est),
-                    whole(&cur),
-                    whole(truth),
+                    losses.0,
+                    losses.1,
+                    losses.2,
                     t0.elapsed().as_secs_f64()
                 );
             }
         }
-        // The judge's loss on the whole image at the start, at the search's result and at
-        // the true disparity: which of the three the objective itself ranks first.
-        let whole = |d: &Image<f32>| judge.loss(&judge.aif, d, target, 0, 0);
-        let (l_est, l_cur, l_true) = (whole(&est), whole(&cur), whole(truth));
+        let (l_est, l_cur, l_true) = losses;
         println!("  whole-image loss: start {l_est:.4}, search {l_cur:.4}, truth {l_true:.4}");
         let bg = scene.layers.layers.last().unwrap().disparity.data[0];
         let fg = |i: usize| (truth.data[i] - bg).abs() > 1e-4;

@@ -116,8 +116,7 @@ pub fn colour_split(
             max_layers: (-tol) as usize,
             ..Default::default()
         };
-        let dec = drbokeh::layering::layers_from_disparity(aif, cur, &opts).unwrap();
-        let owner = crate::edges::owner_of(&dec.thresholds, cur);
+        let (_, owner) = crate::edges::cut(aif, cur, &opts);
         flood(w, h, min_px, |s, n| owner[n] == owner[s])
     } else {
         flood(w, h, min_px, |s, n| (cur.data[n] - cur.data[s]).abs() < tol)
