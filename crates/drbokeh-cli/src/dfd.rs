@@ -199,8 +199,9 @@ fn parse_init(s: &str) -> Result<Init> {
 /// by an edge-aware weighted median (and, with --colour-bins 16, a colour vote: pixels of
 /// one colour take their median disparity, right where each surface has its own colours,
 /// wrong where a texture spans several depths). Writes the disparity
-/// (near = 1), a confidence map (where the pair carries depth information), a preview and
-/// a JSON log of every iteration and the time per scale.
+/// (near = 1), a confidence map (low within the blur of depth steps, where the estimate is
+/// least reliable), optionally the sensitivity map (low where the pair carries no depth
+/// information), a preview and a JSON log of every iteration and the time per scale.
 ///
 /// Examples (a ray-traced pair with its camera, then a pair from a benchmark scene):
 ///   drbokeh trace examples/photo-scene.json -o photo-trace
@@ -246,9 +247,17 @@ pub struct DfdArgs {
     /// Output disparity: .png (16-bit), .npy (float32) or .exr.
     #[arg(long, short, value_name = "FILE")]
     pub output: PathBuf,
-    /// Confidence map, in [0, 1] (default: OUTPUT with .confidence.png).
+    /// Confidence map, in [0, 1] (default: OUTPUT with .confidence.png): 1 where the
+    /// estimate can be trusted, falling to 0 within the blur radius of a depth step (the
+    /// edges of near objects, structures thinner than their blur), where a single-layer
+    /// fit spreads near objects over what lies behind them (docs/dfd.md, "Confidence").
     #[arg(long, value_name = "FILE")]
     pub confidence: Option<PathBuf>,
+    /// Also write the sensitivity map, in [0, 1]: how much the render changes with the
+    /// disparity; near 0 where the pair carries no depth information (flat or in-focus
+    /// regions, filled in by the smoothness). Not written unless given.
+    #[arg(long, value_name = "FILE")]
+    pub sensitivity: Option<PathBuf>,
     /// JSON log: options, loss terms per iteration, time per scale (default: OUTPUT with
     /// .log.json).
     #[arg(long, value_name = "FILE")]
@@ -289,8 +298,11 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         plan.input(i, "--initial-disparity");
     }
     plan.file(&a.output, "--output", &["png", "npy", "exr"])
-        .file(&confidence, "--confidence", &["png", "npy", "exr"])
-        .file(&log_path, "--log", &[])
+        .file(&confidence, "--confidence", &["png", "npy", "exr"]);
+    if let Some(p) = &a.sensitivity {
+        plan.file(p, "--sensitivity", &["png", "npy", "exr"]);
+    }
+    plan.file(&log_path, "--log", &[])
         .file(&preview, "--preview", &["png"])
         .check()?;
 
@@ -355,7 +367,7 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     );
     let result = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
     bar.finish();
-    // All four outputs appear together, once all are written.
+    // All outputs appear together, once all are written.
     let json = serde_json::to_vec_pretty(&result.log)?;
     let rgb = drbokeh::Image::from_vec(
         result.disparity.width,
@@ -366,6 +378,9 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     let mut staging = io::Staging::new();
     staging.grey(&a.output, &result.disparity)?;
     staging.grey(&confidence, &result.confidence)?;
+    if let Some(p) = &a.sensitivity {
+        staging.grey(p, &result.sensitivity)?;
+    }
     staging.output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
     staging.bytes(&log_path, &json)?;
     staging.commit()?;

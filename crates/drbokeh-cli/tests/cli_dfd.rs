@@ -66,6 +66,34 @@ fn dfd_writes_disparity_log_and_preview() {
     assert!(log["entries"][0]["structure"].is_null());
     assert!(d.path().join("disp.confidence.png").exists());
     assert!(d.path().join("disp.preview.png").exists());
+    // The sensitivity map only when asked for (a float map here).
+    let files = std::fs::read_dir(d.path()).unwrap().count();
+    let sens = d.path().join("sens.npy");
+    let o = drbokeh(&[
+        "dfd",
+        "--all-in-focus",
+        p(&a),
+        "--defocused",
+        p(&b),
+        "--focus",
+        "1",
+        "--blur",
+        "4",
+        "--fine-iterations",
+        "2",
+        "--finest-scale",
+        "0",
+        "--output",
+        p(&d.path().join("disp2.png")),
+        "--sensitivity",
+        p(&sens),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // disp2.png, its confidence, log and preview, and the sensitivity.
+    assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), files + 5);
+    let bytes = std::fs::read(&sens).unwrap();
+    assert!(bytes.starts_with(b"\x93NUMPY"));
 }
 
 #[test]
@@ -257,4 +285,64 @@ fn dfd_colour_vote_is_off_by_default_logged_when_on_and_checked() {
     assert_eq!(o.status.code(), Some(2)); // a usage error
     assert!(stderr(&o).contains("--colour-bins"), "{}", stderr(&o));
     assert!(!out.exists());
+}
+
+/// `dfd-eval --benchmark` on a tiny traced benchmark: `results.json` scores each optimised
+/// run's confidence and sensitivity maps by their sparsification (the constant has none),
+/// and `results.md` shows the columns.
+#[test]
+fn dfd_eval_scores_the_confidence_maps() {
+    let d = tempfile::tempdir().unwrap();
+    let bench = d.path().join("bench");
+    let o = drbokeh(&[
+        "benchmark",
+        "make",
+        "--scenes",
+        "2",
+        "--size",
+        "48",
+        "--spp",
+        "4",
+        "--output",
+        p(&bench),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = d.path().join("report");
+    let o = drbokeh(&[
+        "dfd-eval",
+        "--benchmark",
+        p(&bench),
+        "--methods",
+        "physical",
+        "--losses",
+        "hssim",
+        "--groups",
+        "all",
+        "--output",
+        p(&out),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(json["schema_version"], 2);
+    let scenes = json["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 2);
+    for sc in scenes {
+        let runs = sc["results"].as_array().unwrap();
+        let (ours, constant) = (&runs[0], &runs[1]);
+        let mae = ours["errors"]["mae"].as_f64().unwrap();
+        let half = ours["mae_confident_half"].as_f64().unwrap();
+        // The most confident half cannot hold more than twice the whole map's error.
+        assert!((0.0..=2.0 * mae + 1e-12).contains(&half), "{half} vs {mae}");
+        for k in ["ause", "ause_sensitivity", "ause_uninformative"] {
+            let v = ours[k].as_f64().unwrap();
+            // The oracle's curve is the lowest any ranking can reach.
+            assert!((0.0..=1.0).contains(&v), "{k} {v}");
+            assert!(constant[k].is_null());
+        }
+    }
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(md.contains("AUSE confidence / sensitivity / none"));
 }

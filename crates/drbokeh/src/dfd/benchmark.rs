@@ -16,6 +16,7 @@
 //! or the farthest billboard), and ambiguous otherwise (the same blur on both sides of the
 //! focus); determined scenes are split by their largest circle of confusion.
 
+use super::confidence::sparsification;
 use super::{
     estimate_disparity, masked_disparity_errors, DepthRange, DfdOptions, DisparityErrors,
     LossTerms, LossWeights, RenderLayer,
@@ -28,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Version of the [`DfdBenchmarkReport`] schema.
-pub const DFD_BENCHMARK_SCHEMA_VERSION: u32 = 1;
+pub const DFD_BENCHMARK_SCHEMA_VERSION: u32 = 2;
 
 /// Largest CoC (pixels) from which a determined scene is in the main group.
 pub const MAIN_GROUP_MIN_COC_PX: f64 = 6.0;
@@ -251,6 +252,20 @@ pub struct RunResult {
     pub mae_confident: Option<f64>,
     /// Fraction of pixels that are confident (null for the constant guess).
     pub confident_fraction: Option<f64>,
+    /// MAE over the most confident half of the pixels (null for the constant guess).
+    #[serde(default)]
+    pub mae_confident_half: Option<f64>,
+    /// How well the confidence map ranks the pixels by their error: the area between its
+    /// sparsification curve and the oracle's ([`super::confidence::Sparsification::ause`];
+    /// 0 is perfect; null for the constant guess).
+    #[serde(default)]
+    pub ause: Option<f64>,
+    /// The same area for the sensitivity map ([`super::DfdResult::sensitivity`]).
+    #[serde(default)]
+    pub ause_sensitivity: Option<f64>,
+    /// The same area for a map that says nothing, to compare the two with.
+    #[serde(default)]
+    pub ause_uninformative: Option<f64>,
     /// Wall time of the run (seconds; not deterministic).
     pub seconds: f64,
     /// Adam iterations run, all scales together.
@@ -305,6 +320,18 @@ pub struct SummaryRow {
     pub mae_confident: Option<f64>,
     /// Mean confident fraction.
     pub confident_fraction: Option<f64>,
+    /// Mean MAE of the most confident half.
+    #[serde(default)]
+    pub mae_confident_half: Option<f64>,
+    /// Mean AUSE of the confidence map.
+    #[serde(default)]
+    pub ause: Option<f64>,
+    /// Mean AUSE of the sensitivity map.
+    #[serde(default)]
+    pub ause_sensitivity: Option<f64>,
+    /// Mean AUSE of a map that says nothing.
+    #[serde(default)]
+    pub ause_uninformative: Option<f64>,
     /// Mean seconds per scene.
     pub seconds: f64,
 }
@@ -452,15 +479,16 @@ impl DfdScene {
         }
     }
 
-    /// Scores an estimate (and its confidence map, if any).
+    /// Scores an estimate (and its confidence and sensitivity maps, if any).
     pub fn score(
         &self,
         method: DfdMethod,
         estimate: &Image<f32>,
-        confidence: Option<&Image<f32>>,
+        maps: Option<(&Image<f32>, &Image<f32>)>,
         seconds: f64,
         iterations: usize,
     ) -> RunResult {
+        let confidence = maps.map(|m| m.0);
         let truth = &self.inputs.disparity;
         let errors = masked_disparity_errors(estimate, truth, self.depth_range, |_| true)
             .expect("a scene has pixels");
@@ -477,6 +505,20 @@ impl DfdScene {
             }
             None => (None, None),
         };
+        let abs_error: Vec<f64> = estimate
+            .data
+            .iter()
+            .zip(&truth.data)
+            .map(|(e, t)| (*e as f64 - *t as f64).abs())
+            .collect();
+        let ranked = |m: &Image<f32>| {
+            let c: Vec<f64> = m.data.iter().map(|&v| v as f64).collect();
+            sparsification(&abs_error, &c)
+        };
+        let (by_conf, by_sens) = match maps {
+            Some((c, s)) => (Some(ranked(c)), Some(ranked(s))),
+            None => (None, None),
+        };
         RunResult {
             method: method.name(),
             key: method.key(),
@@ -485,6 +527,10 @@ impl DfdScene {
             mae_background: bg.map(|e| e.mae),
             mae_confident,
             confident_fraction,
+            mae_confident_half: by_conf.map(|s| s.mae_confident_half),
+            ause: by_conf.map(|s| s.ause),
+            ause_sensitivity: by_sens.map(|s| s.ause),
+            ause_uninformative: by_conf.map(|s| s.ause_uninformative),
             seconds,
             iterations,
         }
@@ -562,7 +608,7 @@ pub fn run_method(
             let res = scene.score(
                 method,
                 &r.disparity,
-                Some(&r.confidence),
+                Some((&r.confidence, &r.sensitivity)),
                 r.log.seconds,
                 iterations,
             );
@@ -605,6 +651,10 @@ pub fn summarise(methods: &[DfdMethod], scenes: &[SceneReport]) -> Vec<GroupSumm
                         mae_background: mean(runs.iter().filter_map(|r| r.mae_background)),
                         mae_confident: mean(runs.iter().filter_map(|r| r.mae_confident)),
                         confident_fraction: mean(runs.iter().filter_map(|r| r.confident_fraction)),
+                        mae_confident_half: mean(runs.iter().filter_map(|r| r.mae_confident_half)),
+                        ause: mean(runs.iter().filter_map(|r| r.ause)),
+                        ause_sensitivity: mean(runs.iter().filter_map(|r| r.ause_sensitivity)),
+                        ause_uninformative: mean(runs.iter().filter_map(|r| r.ause_uninformative)),
                         seconds: mean(runs.iter().map(|r| r.seconds)).unwrap_or(0.0),
                     }
                 })
@@ -682,6 +732,10 @@ pub fn evaluate(
             ("mae_foreground".into(), "MAE over the pixels where the four front billboards' combined alpha is at least 1/2".into()),
             ("mae_background".into(), "MAE over the other pixels (the background billboard)".into()),
             ("mae_confident".into(), format!("MAE over the pixels whose confidence is at least {CONFIDENT}")),
+            ("mae_confident_half".into(), "MAE over the most confident half of the pixels".into()),
+            ("ause".into(), "area between the confidence map's sparsification curve (MAE of the most confident 5 %, 10 %, ..., 100 %) and the oracle's (pixels of least error first), mean over the 20 samples; 0 is a perfect ranking".into()),
+            ("ause_sensitivity".into(), "the same for the sensitivity map (where the render changes with the disparity)".into()),
+            ("ause_uninformative".into(), "the same for a map that says nothing (every fraction has the whole MAE)".into()),
             ("constant".into(), "the median of the true disparity everywhere (an oracle constant)".into()),
         ],
         options: super::log::RunOptions::of(&config.template),

@@ -16,14 +16,16 @@
 //!   [`Highlights::Mask`] the pixels such a highlight could reach are left out of the
 //!   loss. Pixels clipped in the defocused image are always left out (the sensor clipped
 //!   them), and the render is clipped to [0, 1] as the sensor would.
-//! - **Confidence.** Where the pair carries no depth information (flat regions, the
-//!   render does not change with disparity) the estimate is a guess; [`DfdResult`] has a
-//!   confidence map: the render's sensitivity to disparity around each pixel.
+//! - **Confidence.** [`DfdResult`] has two maps: a confidence (low within the blur radius
+//!   of the estimate's steps, where the single-layer objective fattens near objects;
+//!   [`confidence`]) and the render's sensitivity to disparity (low where the pair carries
+//!   no depth information: flat or in-focus regions).
 //!
 //! The log ([`log::DfdLog`]) records every option, every iteration's loss terms and the
 //! time spent per scale.
 
 pub mod benchmark;
+pub mod confidence;
 pub mod experiment;
 mod highlights;
 pub mod layered;
@@ -530,16 +532,27 @@ impl DfdOptions {
 pub struct DfdResult<T> {
     /// Estimated disparity (HxWx1, in [0, 1]).
     pub disparity: Image<T>,
-    /// Confidence in [0, 1] (HxWx1): how much the render changes with the disparity around
+    /// Confidence in [0, 1] (HxWx1): how far to trust each pixel of the estimate, the
+    /// occlusion band of [`confidence::occlusion_band`] with [`confidence::OcclusionBand::DEFAULT`].
+    /// Near 0 within the blur radius of a step in the estimate (at the edges of near objects
+    /// and across structures thinner than their blur), where the single-layer objective
+    /// fattens near objects over what lies behind them; 1 elsewhere. On the benchmark the
+    /// most confident half of the pixels has about a third of the whole map's error
+    /// (`docs/dfd.md`, "Confidence").
+    pub confidence: Image<T>,
+    /// Sensitivity in [0, 1] (HxWx1): how much the render changes with the disparity around
     /// each pixel, `s / (s + s0)` with `s` the mean absolute change of the encoded render per
     /// unit disparity over a 5x5 neighbourhood and `s0` = [`CONFIDENCE_HALF_SENSITIVITY`].
-    /// Near 0 where the pair carries no depth information.
-    pub confidence: Image<T>,
+    /// Near 0 where the pair carries no depth information (flat or in-focus regions: there
+    /// the estimate comes from the smoothness and the median, not from the pair). It is
+    /// *high* at edges, where the estimate is least reliable, so it is not a confidence.
+    pub sensitivity: Image<T>,
     /// Everything the run did.
     pub log: DfdLog,
 }
 
-/// The sensitivity (encoded intensity per unit disparity) at which confidence is 1/2.
+/// The sensitivity (encoded intensity per unit disparity) at which [`DfdResult::sensitivity`]
+/// is 1/2.
 pub const CONFIDENCE_HALF_SENSITIVITY: f64 = 0.05;
 
 /// Disparity error statistics against ground truth.

@@ -1,5 +1,6 @@
 //! The coarse-to-fine Adam loop of [`estimate_disparity`].
 
+use super::confidence::{occlusion_band_within_budget, OcclusionBand, OCCLUSION_BAND_BUDGET};
 use super::layered::LayeredModel;
 use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
 use super::maps::{
@@ -532,7 +533,8 @@ pub fn estimate_disparity<T: Real>(
         disp_f = weighted_median(&disp_f, &guide, fw, fh, r, m.sigma);
     }
 
-    // Confidence, at the finest scale optimised: the render's sensitivity to disparity.
+    // Sensitivity, at the finest scale optimised: how much the render changes with the
+    // disparity (docs/dfd.md, "Confidence").
     let aif_f: Image<T> = encode_image(&aif_at(finest, &log_gain), fw, fh, &tone);
     let mut settings = options.settings.clone();
     settings.camera.blur_k = k_full / (1u64 << finest) as f64;
@@ -563,12 +565,12 @@ pub fn estimate_disparity<T: Real>(
         })
         .collect();
     let sens = box_mean(&sens, fw, fh, CONFIDENCE_RADIUS);
-    let conf: Vec<f64> = sens
+    let sensitivity: Vec<f64> = sens
         .iter()
         .map(|&s| s / (s + CONFIDENCE_HALF_SENSITIVITY))
         .collect();
-    let (disp, conf) = if (fw, fh) == (w, h) {
-        (disp_f, conf)
+    let (disp, sensitivity) = if (fw, fh) == (w, h) {
+        (disp_f, sensitivity)
     } else {
         let mut d = upsample(&disp_f, fw, fh, w, h);
         if let Some(m) = options.median {
@@ -579,7 +581,7 @@ pub fn estimate_disparity<T: Real>(
                 .collect();
             d = weighted_median(&d, &guide, w, h, 1 << finest, m.sigma);
         }
-        (d, upsample(&conf, fw, fh, w, h))
+        (d, upsample(&sensitivity, fw, fh, w, h))
     };
     let disp = match options.colour_vote {
         Some(bins) => {
@@ -596,6 +598,16 @@ pub fn estimate_disparity<T: Real>(
         }
         None => disp,
     };
+    // Confidence: the occlusion band of the final map (docs/dfd.md, "Confidence").
+    let confidence = occlusion_band_within_budget(
+        &disp,
+        w,
+        h,
+        k_full,
+        focus,
+        OcclusionBand::DEFAULT,
+        OCCLUSION_BAND_BUDGET,
+    );
     let disparity: Image<T> = to_image(&disp, w, h, 1);
 
     let log = DfdLog {
@@ -615,7 +627,8 @@ pub fn estimate_disparity<T: Real>(
     };
     Ok(DfdResult {
         disparity,
-        confidence: to_image(&conf, w, h, 1),
+        confidence: to_image(&confidence, w, h, 1),
+        sensitivity: to_image(&sensitivity, w, h, 1),
         log,
     })
 }

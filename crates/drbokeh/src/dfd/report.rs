@@ -72,6 +72,14 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     }
 }
 
+/// A summary row's three AUSE values, `confidence / sensitivity / none`.
+fn ause_triple(r: &SummaryRow) -> String {
+    match (r.ause, r.ause_sensitivity, r.ause_uninformative) {
+        (None, None, None) => "-".into(),
+        (a, b, c) => format!("{} / {} / {}", opt(a, 4), opt(b, 4), opt(c, 4)),
+    }
+}
+
 /// How many times larger `other`'s MAE is than `ours` (`-` if undefined).
 fn ratio(ours: &SummaryRow, other: &SummaryRow) -> String {
     if ours.mae > 0.0 && other.mae.is_finite() {
@@ -94,11 +102,11 @@ pub fn results_markdown(report: &DfdBenchmarkReport) -> String {
     );
     for g in &report.summary {
         let _ = writeln!(s, "## {} ({} scenes)\n", g.title, g.scenes.len());
-        s.push_str("| method | MAE | RMSE | δ<1.25 | MAE fg | MAE bg | MAE confident | confident | s/scene |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+        s.push_str("| method | MAE | RMSE | δ<1.25 | MAE fg | MAE bg | MAE confident | confident | MAE most confident half | AUSE confidence / sensitivity / none | s/scene |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
         for r in &g.rows {
             let _ = writeln!(
                 s,
-                "| {} | {:.4} | {:.4} | {:.3} | {} | {} | {} | {} | {:.1} |",
+                "| {} | {:.4} | {:.4} | {:.3} | {} | {} | {} | {} | {} | {} | {:.1} |",
                 r.method,
                 r.mae,
                 r.rmse,
@@ -107,6 +115,8 @@ pub fn results_markdown(report: &DfdBenchmarkReport) -> String {
                 opt(r.mae_background, 4),
                 opt(r.mae_confident, 4),
                 opt(r.confident_fraction, 2),
+                opt(r.mae_confident_half, 4),
+                ause_triple(r),
                 r.seconds
             );
         }
@@ -185,14 +195,14 @@ small { color: #666; font-weight: normal; }
     for g in &report.summary {
         let _ = writeln!(
             s,
-            "<h2>{} ({} scenes)</h2><table><tr><th>method</th><th>MAE</th><th>RMSE</th><th>&delta;&lt;1.25</th><th>MAE fg</th><th>MAE bg</th><th>MAE confident</th><th>confident</th><th>s/scene</th></tr>",
+            "<h2>{} ({} scenes)</h2><table><tr><th>method</th><th>MAE</th><th>RMSE</th><th>&delta;&lt;1.25</th><th>MAE fg</th><th>MAE bg</th><th>MAE confident</th><th>confident</th><th>MAE most confident half</th><th>AUSE confidence / sensitivity / none</th><th>s/scene</th></tr>",
             esc(&g.title),
             g.scenes.len()
         );
         for r in &g.rows {
             let _ = writeln!(
                 s,
-                "<tr><td>{}</td><td>{:.4}</td><td>{:.4}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1}</td></tr>",
+                "<tr><td>{}</td><td>{:.4}</td><td>{:.4}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1}</td></tr>",
                 esc(&r.method),
                 r.mae,
                 r.rmse,
@@ -201,6 +211,8 @@ small { color: #666; font-weight: normal; }
                 opt(r.mae_background, 4),
                 opt(r.mae_confident, 4),
                 opt(r.confident_fraction, 2),
+                opt(r.mae_confident_half, 4),
+                ause_triple(r),
                 r.seconds
             );
         }
@@ -255,7 +267,7 @@ small { color: #666; font-weight: normal; }
                 };
                 let _ = write!(
                     s,
-                    "<figure><img src=\"{dir}/{k}.conf.png\" alt=\"confidence\"><figcaption>confidence of {n} (white = informative); MAE where &ge; 0.5: {}</figcaption></figure>",
+                    "<figure><img src=\"{dir}/{k}.conf.png\" alt=\"confidence\"><figcaption>confidence of {n} (white = trusted, dark = within the blur of a depth step); MAE where &ge; 0.5: {}</figcaption></figure>",
                     opt(r.mae_confident, 3),
                     k = m.key(),
                     n = esc(&r.method)
