@@ -20,35 +20,53 @@ fn write_pair(dir: &std::path::Path, w: u32, h: u32) -> (std::path::PathBuf, std
     (a, b)
 }
 
+/// `drbokeh dfd` on a pair at focus 1, K 4, full resolution, quiet, with `extra` options.
+fn quick_dfd(
+    a: &std::path::Path,
+    b: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args = vec![
+        "dfd",
+        "--all-in-focus",
+        p(a),
+        "--defocused",
+        p(b),
+        "--focus",
+        "1",
+        "--blur",
+        "4",
+        "--finest-scale",
+        "0",
+        "--output",
+        p(out),
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    drbokeh(&args)
+}
+
 #[test]
 fn dfd_writes_disparity_log_and_preview() {
     let d = tempfile::tempdir().unwrap();
     let (a, b) = write_pair(d.path(), 32, 32);
     let out = d.path().join("disp.png");
-    let o = drbokeh(&[
-        "dfd",
-        "--all-in-focus",
-        p(&a),
-        "--defocused",
-        p(&b),
-        "--focus",
-        "1",
-        "--blur",
-        "4",
-        "--fine-iterations",
-        "3",
-        "--patience",
-        "0",
-        "--finest-scale",
-        "0",
-        "--method",
-        "gausspsf",
-        "--losses",
-        "l1,smooth=2",
-        "--output",
-        p(&out),
-        "-q",
-    ]);
+    let o = quick_dfd(
+        &a,
+        &b,
+        &out,
+        &[
+            "--fine-iterations",
+            "3",
+            "--patience",
+            "0",
+            "--method",
+            "gausspsf",
+            "--losses",
+            "l1,smooth=2",
+        ],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let disp = image::open(&out).unwrap();
     assert!(matches!(disp, image::DynamicImage::ImageLuma16(_)));
@@ -69,26 +87,12 @@ fn dfd_writes_disparity_log_and_preview() {
     // The sensitivity map only when asked for (a float map here).
     let files = std::fs::read_dir(d.path()).unwrap().count();
     let sens = d.path().join("sens.npy");
-    let o = drbokeh(&[
-        "dfd",
-        "--all-in-focus",
-        p(&a),
-        "--defocused",
-        p(&b),
-        "--focus",
-        "1",
-        "--blur",
-        "4",
-        "--fine-iterations",
-        "2",
-        "--finest-scale",
-        "0",
-        "--output",
-        p(&d.path().join("disp2.png")),
-        "--sensitivity",
-        p(&sens),
-        "-q",
-    ]);
+    let o = quick_dfd(
+        &a,
+        &b,
+        &d.path().join("disp2.png"),
+        &["--fine-iterations", "2", "--sensitivity", p(&sens)],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     // disp2.png, its confidence, log and preview, and the sensitivity.
     assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), files + 5);

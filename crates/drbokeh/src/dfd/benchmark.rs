@@ -234,6 +234,48 @@ impl SceneGroup {
     }
 }
 
+/// How well a run's maps rank its pixels by their error (each null for the constant guess,
+/// which has no maps; in a [`SummaryRow`], the means over the scenes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RankingScores {
+    /// MAE over the most confident half of the pixels.
+    pub mae_confident_half: Option<f64>,
+    /// The area between the confidence map's sparsification curve and the oracle's
+    /// ([`super::confidence::Sparsification::ause`]; 0 is a perfect ranking).
+    pub ause: Option<f64>,
+    /// The same area for the sensitivity map ([`super::DfdResult::sensitivity`]).
+    pub ause_sensitivity: Option<f64>,
+    /// The same area for a map that says nothing, to compare the two with.
+    pub ause_uninformative: Option<f64>,
+}
+
+impl RankingScores {
+    /// The scores of an estimate's confidence and sensitivity maps.
+    fn of(abs_error: &[f64], confidence: &Image<f32>, sensitivity: &Image<f32>) -> Self {
+        let ranked = |m: &Image<f32>| {
+            let c: Vec<f64> = m.data.iter().map(|&v| v as f64).collect();
+            sparsification(abs_error, &c)
+        };
+        let (c, s) = (ranked(confidence), ranked(sensitivity));
+        RankingScores {
+            mae_confident_half: Some(c.mae_confident_half),
+            ause: Some(c.ause),
+            ause_sensitivity: Some(s.ause),
+            ause_uninformative: Some(c.ause_uninformative),
+        }
+    }
+
+    /// Field by field, the mean over the runs that have it.
+    fn mean<'a>(runs: impl Iterator<Item = &'a RankingScores> + Clone) -> Self {
+        RankingScores {
+            mae_confident_half: mean(runs.clone().filter_map(|r| r.mae_confident_half)),
+            ause: mean(runs.clone().filter_map(|r| r.ause)),
+            ause_sensitivity: mean(runs.clone().filter_map(|r| r.ause_sensitivity)),
+            ause_uninformative: mean(runs.filter_map(|r| r.ause_uninformative)),
+        }
+    }
+}
+
 /// The scores of one method on one scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunResult {
@@ -252,20 +294,9 @@ pub struct RunResult {
     pub mae_confident: Option<f64>,
     /// Fraction of pixels that are confident (null for the constant guess).
     pub confident_fraction: Option<f64>,
-    /// MAE over the most confident half of the pixels (null for the constant guess).
-    #[serde(default)]
-    pub mae_confident_half: Option<f64>,
-    /// How well the confidence map ranks the pixels by their error: the area between its
-    /// sparsification curve and the oracle's ([`super::confidence::Sparsification::ause`];
-    /// 0 is perfect; null for the constant guess).
-    #[serde(default)]
-    pub ause: Option<f64>,
-    /// The same area for the sensitivity map ([`super::DfdResult::sensitivity`]).
-    #[serde(default)]
-    pub ause_sensitivity: Option<f64>,
-    /// The same area for a map that says nothing, to compare the two with.
-    #[serde(default)]
-    pub ause_uninformative: Option<f64>,
+    /// How well its confidence and sensitivity maps rank the pixels by their error.
+    #[serde(flatten)]
+    pub ranking: RankingScores,
     /// Wall time of the run (seconds; not deterministic).
     pub seconds: f64,
     /// Adam iterations run, all scales together.
@@ -320,18 +351,9 @@ pub struct SummaryRow {
     pub mae_confident: Option<f64>,
     /// Mean confident fraction.
     pub confident_fraction: Option<f64>,
-    /// Mean MAE of the most confident half.
-    #[serde(default)]
-    pub mae_confident_half: Option<f64>,
-    /// Mean AUSE of the confidence map.
-    #[serde(default)]
-    pub ause: Option<f64>,
-    /// Mean AUSE of the sensitivity map.
-    #[serde(default)]
-    pub ause_sensitivity: Option<f64>,
-    /// Mean AUSE of a map that says nothing.
-    #[serde(default)]
-    pub ause_uninformative: Option<f64>,
+    /// The means of the runs' [`RunResult::ranking`].
+    #[serde(flatten)]
+    pub ranking: RankingScores,
     /// Mean seconds per scene.
     pub seconds: f64,
 }
@@ -511,14 +533,9 @@ impl DfdScene {
             .zip(&truth.data)
             .map(|(e, t)| (*e as f64 - *t as f64).abs())
             .collect();
-        let ranked = |m: &Image<f32>| {
-            let c: Vec<f64> = m.data.iter().map(|&v| v as f64).collect();
-            sparsification(&abs_error, &c)
-        };
-        let (by_conf, by_sens) = match maps {
-            Some((c, s)) => (Some(ranked(c)), Some(ranked(s))),
-            None => (None, None),
-        };
+        let ranking = maps
+            .map(|(c, s)| RankingScores::of(&abs_error, c, s))
+            .unwrap_or_default();
         RunResult {
             method: method.name(),
             key: method.key(),
@@ -527,10 +544,7 @@ impl DfdScene {
             mae_background: bg.map(|e| e.mae),
             mae_confident,
             confident_fraction,
-            mae_confident_half: by_conf.map(|s| s.mae_confident_half),
-            ause: by_conf.map(|s| s.ause),
-            ause_sensitivity: by_sens.map(|s| s.ause),
-            ause_uninformative: by_conf.map(|s| s.ause_uninformative),
+            ranking,
             seconds,
             iterations,
         }
@@ -651,10 +665,7 @@ pub fn summarise(methods: &[DfdMethod], scenes: &[SceneReport]) -> Vec<GroupSumm
                         mae_background: mean(runs.iter().filter_map(|r| r.mae_background)),
                         mae_confident: mean(runs.iter().filter_map(|r| r.mae_confident)),
                         confident_fraction: mean(runs.iter().filter_map(|r| r.confident_fraction)),
-                        mae_confident_half: mean(runs.iter().filter_map(|r| r.mae_confident_half)),
-                        ause: mean(runs.iter().filter_map(|r| r.ause)),
-                        ause_sensitivity: mean(runs.iter().filter_map(|r| r.ause_sensitivity)),
-                        ause_uninformative: mean(runs.iter().filter_map(|r| r.ause_uninformative)),
+                        ranking: RankingScores::mean(runs.iter().map(|r| &r.ranking)),
                         seconds: mean(runs.iter().map(|r| r.seconds)).unwrap_or(0.0),
                     }
                 })

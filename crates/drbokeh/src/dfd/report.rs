@@ -74,7 +74,8 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 
 /// A summary row's three AUSE values, `confidence / sensitivity / none`.
 fn ause_triple(r: &SummaryRow) -> String {
-    match (r.ause, r.ause_sensitivity, r.ause_uninformative) {
+    let k = &r.ranking;
+    match (k.ause, k.ause_sensitivity, k.ause_uninformative) {
         (None, None, None) => "-".into(),
         (a, b, c) => format!("{} / {} / {}", opt(a, 4), opt(b, 4), opt(c, 4)),
     }
@@ -115,7 +116,7 @@ pub fn results_markdown(report: &DfdBenchmarkReport) -> String {
                 opt(r.mae_background, 4),
                 opt(r.mae_confident, 4),
                 opt(r.confident_fraction, 2),
-                opt(r.mae_confident_half, 4),
+                opt(r.ranking.mae_confident_half, 4),
                 ause_triple(r),
                 r.seconds
             );
@@ -211,7 +212,7 @@ small { color: #666; font-weight: normal; }
                 opt(r.mae_background, 4),
                 opt(r.mae_confident, 4),
                 opt(r.confident_fraction, 2),
-                opt(r.mae_confident_half, 4),
+                opt(r.ranking.mae_confident_half, 4),
                 ause_triple(r),
                 r.seconds
             );
