@@ -1,14 +1,14 @@
 //! Scratch study: how well confidence maps rank the pixels of `dfd`'s estimate by their
 //! error on benchmark scenes (`docs/dfd.md`, section "Confidence").
 //!
-//! `dfd_confidence [layer=physical|aperture] [cache=DIR] SCENE_DIR...` runs `dfd` with the
-//! defaults once per scene and layer (the estimate and its sensitivity map cached in
-//! `cache`), then scores the sensitivity map, the occlusion band at a grid of scales, and
-//! their product, by the MAE of the most confident half and the area under the
-//! sparsification curve.
-use drbokeh::dfd::benchmark::{run_method, DfdLayer, DfdMethod, DfdScene, LossCombo};
+//! `dfd_confidence [layer=physical|aperture|gausspsf] [cache=DIR] SCENE_DIR...` runs `dfd`
+//! with the defaults once per scene and layer (the estimate and its sensitivity map cached
+//! in `cache`, default `/work/data/dfd/conf/cache2`), then scores the sensitivity map, the
+//! occlusion band at a grid of scales, and their product, by the MAE of the most confident
+//! half and the area under the sparsification curve.
+use drbokeh::dfd::benchmark::{DfdLayer, DfdScene, LossCombo};
 use drbokeh::dfd::confidence::{occlusion_band, sparsification, OcclusionBand};
-use drbokeh::dfd::{DfdOptions, RenderLayer};
+use drbokeh::dfd::{estimate_disparity, DfdOptions, RenderLayer};
 use drbokeh::RenderSettings;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -27,7 +27,7 @@ fn read_cache(p: &Path, n: usize) -> Option<(Vec<f64>, Vec<f64>)> {
 
 fn main() {
     let mut layer = "physical".to_string();
-    let mut cache = PathBuf::from("/work/data/dfd/conf/cache");
+    let mut cache = PathBuf::from("/work/data/dfd/conf/cache2");
     let mut grid = "1:0.1".to_string();
     let mut scenes = Vec::new();
     let mut refine: Option<(f64, f64, f64)> = None;
@@ -80,12 +80,16 @@ fn main() {
         let (est, sens) = match read_cache(&cache.join(&key), n) {
             Some(c) => c,
             None => {
-                let m = DfdMethod::Optimised {
-                    layer: dlayer,
-                    losses: LossCombo::L1GHssim,
-                };
-                let (_, est, conf) = run_method(&scene, m, &template).unwrap();
-                let conf = conf.unwrap();
+                // As `dfd-eval` runs it (`benchmark::run_method`), keeping the sensitivity.
+                let (render_layer, preset) = dlayer.layer_and_preset();
+                let mut o = template.clone();
+                o.settings = scene.settings(preset);
+                o.settings.camera.gamma = template.settings.camera.gamma;
+                o.layer = render_layer;
+                let (w8, terms) = LossCombo::L1GHssim.weights(template.weights);
+                (o.weights, o.terms) = (w8, terms);
+                let r = estimate_disparity(&i.aif, &i.ground_truth, &o, &mut |_| {}).unwrap();
+                let (est, conf) = (r.disparity, r.sensitivity);
                 let bytes: Vec<u8> = est
                     .data
                     .iter()
