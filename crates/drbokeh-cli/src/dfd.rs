@@ -28,9 +28,11 @@ pub struct OptimiserArgs {
     /// Most Adam iterations at each coarse scale.
     #[arg(long, default_value_t = 100, value_name = "N")]
     pub iterations: usize,
-    /// Most Adam iterations at the finest scale optimised.
-    #[arg(long, default_value_t = 40, value_name = "N")]
-    pub fine_iterations: usize,
+    /// Most Adam iterations at the finest scale optimised. Default: 40, fewer where an
+    /// iteration is costly (pairs optimised at full resolution with a small blur: about 25 at
+    /// 256 px, docs/dfd.md "Small blurs"); given, at most that many, whatever they cost
+    #[arg(long, value_name = "N")]
+    pub fine_iterations: Option<usize>,
     /// Stop a scale after this many iterations without a 0.1 % lower loss (0: never).
     #[arg(long, default_value_t = 10, value_name = "N")]
     pub patience: usize,
@@ -112,7 +114,10 @@ impl OptimiserArgs {
         o.schedule.finest_scale = self.finest_scale;
         o.schedule.coarse_scales = self.coarse_scales;
         o.schedule.iterations = self.iterations;
-        o.schedule.fine_iterations = self.fine_iterations;
+        if let Some(n) = self.fine_iterations {
+            o.schedule.fine_iterations = n;
+            o.schedule.fine_cost_per_pixel = None;
+        }
         o.schedule.patience = self.patience;
         o.schedule.learning_rate = self.lr;
         o.schedule.learning_rate_decay = self.lr_decay;
@@ -265,7 +270,8 @@ pub struct DfdArgs {
     /// Preview PNG of the disparity (default: OUTPUT with .preview.png).
     #[arg(long, value_name = "FILE")]
     pub preview: Option<PathBuf>,
-    /// No progress bar or summary.
+    /// No progress bar or summary (notes on the estimate's reliability, such as a blur too
+    /// small at the scale optimised, are still printed).
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -361,9 +367,13 @@ pub fn run(a: &DfdArgs) -> Result<()> {
         o.initial_disparity = Some(d);
     }
     let bar = Bar::new("dfd", a.quiet);
+    let largest_blur_px = a.blur_k * a.focus.max(1.0 - a.focus);
+    let finest = o
+        .schedule
+        .finest_for(aif.width, aif.height, largest_blur_px);
     bar.start(
         o.schedule.iterations as u64 * o.schedule.coarse_scales as u64
-            + o.schedule.fine_iterations as u64,
+            + o.schedule.fine_iterations_for(finest, largest_blur_px) as u64,
     );
     let result = estimate_disparity(&aif, &target, &o, &mut |_| bar.advance(1))?;
     bar.finish();
@@ -384,6 +394,10 @@ pub fn run(a: &DfdArgs) -> Result<()> {
     staging.output(&preview, &rgb, io::BitDepth::Eight, |v| v)?;
     staging.bytes(&log_path, &json)?;
     staging.commit()?;
+    // Notes speak of the estimate's reliability: printed even with --quiet.
+    for note in &result.log.notes {
+        eprintln!("drbokeh: note: {note}");
+    }
     if !a.quiet {
         let last = result
             .log

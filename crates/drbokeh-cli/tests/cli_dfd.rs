@@ -68,6 +68,8 @@ fn dfd_writes_disparity_log_and_preview() {
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
+    // Blur 4 px at full resolution, focus 1: nothing to note, and -q prints nothing.
+    assert!(stderr(&o).is_empty(), "{}", stderr(&o));
     let disp = image::open(&out).unwrap();
     assert!(matches!(disp, image::DynamicImage::ImageLuma16(_)));
     let log: serde_json::Value =
@@ -98,6 +100,46 @@ fn dfd_writes_disparity_log_and_preview() {
     assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), files + 5);
     let bytes = std::fs::read(&sens).unwrap();
     assert!(bytes.starts_with(b"\x93NUMPY"));
+}
+
+#[test]
+fn dfd_notes_a_small_blur_and_a_focus_inside_the_range() {
+    let d = tempfile::tempdir().unwrap();
+    let (a, b) = write_pair(d.path(), 32, 32);
+    let out = d.path().join("disp.png");
+    // Focus 0.5 with K 4: the largest blur is 2 px, and the sign of d is open.
+    let o = drbokeh(&[
+        "dfd",
+        "--all-in-focus",
+        p(&a),
+        "--defocused",
+        p(&b),
+        "--focus",
+        "0.5",
+        "--blur",
+        "4",
+        "--fine-iterations",
+        "2",
+        "--output",
+        p(&out),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    // Printed even with -q, one line each.
+    let notes: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("drbokeh: note: "))
+        .collect();
+    assert_eq!(notes.len(), 2, "{err}");
+    assert!(notes[0].contains("largest blur is 2.0 px"), "{err}");
+    assert!(notes[1].contains("focus 0.5 is inside"), "{err}");
+    let log: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.path().join("disp.log.json")).unwrap()).unwrap();
+    assert_eq!(log["schema_version"], 2);
+    assert_eq!(log["notes"][0]["kind"], "small_blur");
+    assert_eq!(log["notes"][0]["blur_px"], 2.0);
+    assert_eq!(log["notes"][1]["kind"], "focus_inside");
 }
 
 #[test]

@@ -40,7 +40,7 @@ mod sweep;
 pub use layers::{
     render_layer, render_layer_on, render_layer_vjp, render_layer_vjp_on, RenderLayer,
 };
-pub use log::{DfdLog, LogEntry, RunOptions, ScaleLog};
+pub use log::{DfdLog, DfdNote, LogEntry, RunOptions, ScaleLog};
 pub use optimise::estimate_disparity;
 
 use crate::image::Image;
@@ -292,8 +292,16 @@ pub struct Schedule {
     pub coarse_scales: usize,
     /// Most Adam iterations at each coarse scale.
     pub iterations: usize,
-    /// Most Adam iterations at the finest scale optimised.
+    /// Most Adam iterations at the finest scale optimised (lowered by
+    /// [`Schedule::fine_cost_per_pixel`]: [`Schedule::fine_iterations_for`]).
     pub fine_iterations: usize,
+    /// Cost budget of the finest scale's iterations per pixel of the pair, in disc taps:
+    /// where `fine_iterations` iterations would cost more, fewer run (at least
+    /// [`Schedule::MIN_FINE_ITERATIONS`]). `None`: `fine_iterations` as given. The default
+    /// ([`Schedule::AUTO_FINE_COST_PER_PIXEL`]) keeps 256 px pairs optimised at full
+    /// resolution (blurs under about 4 px) within the time target.
+    #[serde(default)]
+    pub fine_cost_per_pixel: Option<f64>,
     /// Adam learning rate (parameter units per step, roughly) at the coarsest scale.
     pub learning_rate: f64,
     /// Factor on the learning rate at each finer scale.
@@ -312,6 +320,40 @@ impl Schedule {
     /// Cost budget of one iteration at the finest scale when [`Schedule::finest_scale`] is
     /// `None`: pixels times the disc area `pi (K max|d| + 1)^2` of the largest blur.
     pub const AUTO_FINEST_TAPS: f64 = 5.0e6;
+
+    /// The cost of one iteration per pixel of a scale, in disc taps, besides the disc itself:
+    /// measured on 256 px benchmark pairs at full resolution (seeds 101, 102: 18-24 s for 40
+    /// iterations at blurs of 2-3.6 px, about 0.45 s per iteration of which the disc is a
+    /// small part), rounded.
+    pub const FINE_PIXEL_TAPS: f64 = 250.0;
+
+    /// Default of [`Schedule::fine_cost_per_pixel`]: about 25 iterations for a pair optimised
+    /// at full resolution with a small blur, no cap at the coarser scales.
+    pub const AUTO_FINE_COST_PER_PIXEL: f64 = 7500.0;
+
+    /// The fewest iterations [`Schedule::fine_cost_per_pixel`] leaves at the finest scale.
+    pub const MIN_FINE_ITERATIONS: usize = 10;
+
+    /// Most iterations at the finest scale `finest` for a `width x height` pair with largest
+    /// blur radius `max_blur_px` (at full resolution): [`Schedule::fine_iterations`], fewer
+    /// where they would cost more than [`Schedule::fine_cost_per_pixel`] per pixel of the
+    /// pair, an iteration at scale `s` costing `(FINE_PIXEL_TAPS + pi (b_s + 1)^2) / 4^s`
+    /// per full-resolution pixel (`b_s` the largest blur there).
+    pub fn fine_iterations_for(&self, finest: usize, max_blur_px: f64) -> usize {
+        let Some(budget) = self.fine_cost_per_pixel else {
+            return self.fine_iterations;
+        };
+        let f = (1u64 << finest.min(62)) as f64;
+        let r = max_blur_px / f + 1.0;
+        let per_iteration = (Self::FINE_PIXEL_TAPS + std::f64::consts::PI * r * r) / (f * f);
+        let cap = (budget / per_iteration).floor();
+        let cap = if cap.is_finite() && cap >= 0.0 {
+            (cap.min(usize::MAX as f64) as usize).max(Self::MIN_FINE_ITERATIONS)
+        } else {
+            Self::MIN_FINE_ITERATIONS
+        };
+        self.fine_iterations.min(cap)
+    }
 
     /// The finest scale to optimise for a `width x height` pair with largest blur radius
     /// `max_blur_px` (at full resolution).
@@ -418,6 +460,7 @@ impl DfdOptions {
                 coarse_scales: 0,
                 iterations: 100,
                 fine_iterations: 40,
+                fine_cost_per_pixel: Some(Schedule::AUTO_FINE_COST_PER_PIXEL),
                 learning_rate: 0.1,
                 learning_rate_decay: 0.7,
                 patience: 10,
@@ -633,4 +676,34 @@ pub fn masked_disparity_errors<T: Real>(
         rmse: (sq / n).sqrt(),
         within_1_25: ok / n,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn costly_finest_scales_get_fewer_iterations() {
+        let s = DfdOptions::new(RenderSettings::physical(1.0), RenderLayer::DrBokeh).schedule;
+        // 256 px at full resolution with a 2 px blur: (250 + 9 pi) per pixel, 26 iterations.
+        assert_eq!(s.fine_iterations_for(0, 2.0), 26);
+        // The benchmark's usual case, 128 px (scale 1) with a 4.5 px blur there: no cap.
+        assert_eq!(s.fine_iterations_for(1, 9.0), 40);
+        // A huge blur at full resolution: never under the floor.
+        assert_eq!(
+            s.fine_iterations_for(0, 500.0),
+            Schedule::MIN_FINE_ITERATIONS
+        );
+        // No budget: as given; a smaller count than the cap is kept.
+        let free = Schedule {
+            fine_cost_per_pixel: None,
+            ..s
+        };
+        assert_eq!(free.fine_iterations_for(0, 2.0), 40);
+        let few = Schedule {
+            fine_iterations: 3,
+            ..s
+        };
+        assert_eq!(few.fine_iterations_for(0, 2.0), 3);
+    }
 }

@@ -2,7 +2,7 @@
 
 use super::confidence::{occlusion_band_within_budget, OcclusionBand, OCCLUSION_BAND_BUDGET};
 use super::layered::LayeredModel;
-use super::log::{DfdLog, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
+use super::log::{DfdLog, DfdNote, LogEntry, RunOptions, ScaleLog, DFD_LOG_SCHEMA_VERSION};
 use super::maps::{
     box_mean, colour_vote, dilate, encode_image, pool, pool_adjoint, to_image, upsample,
     weighted_median,
@@ -390,7 +390,7 @@ pub fn estimate_disparity<T: Real>(
                 .learning_rate_decay
                 .powi((n_scales - 1 - scale) as i32);
         let max_iters = if scale == finest {
-            sched.fine_iterations
+            sched.fine_iterations_for(finest, k_full * max_rel)
         } else {
             sched.iterations
         };
@@ -623,6 +623,7 @@ pub fn estimate_disparity<T: Real>(
         masked_fraction,
         scales: scale_logs,
         entries,
+        notes: DfdNote::for_run(w, h, focus, k_full, finest),
         seconds: started.elapsed().as_secs_f64(),
     };
     Ok(DfdResult {
