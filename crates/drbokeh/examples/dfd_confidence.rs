@@ -5,8 +5,11 @@
 //! with the defaults once per scene and layer (the estimate and its sensitivity map cached
 //! in `cache`, default `/work/data/dfd/conf/cache2`), then scores the sensitivity map, the
 //! occlusion band at a grid of scales, and their product, by the MAE of the most confident
-//! half and the area under the sparsification curve.
-use drbokeh::dfd::benchmark::{DfdLayer, DfdScene, LossCombo};
+//! half and the area under the sparsification curve. `refine=R:S:F` refills the band's
+//! pixels by a confidence x colour weighted median; `prop=L:S:P[:sens|band|both]` fills the
+//! estimate by weighted least squares (data weight the chosen map to the power P, colour-
+//! aware smoothness L with colour sigma S) (`docs/dfd.md`, "Confidence" and "Small blurs").
+use drbokeh::dfd::benchmark::{method_options, DfdLayer, DfdScene, LossCombo};
 use drbokeh::dfd::confidence::{occlusion_band, sparsification, OcclusionBand};
 use drbokeh::dfd::{estimate_disparity, DfdOptions, RenderLayer};
 use drbokeh::RenderSettings;
@@ -32,6 +35,8 @@ fn main() {
     let mut scenes = Vec::new();
     let mut refine: Option<(f64, f64, f64)> = None;
     let mut refined: Vec<f64> = Vec::new();
+    let mut prop: Option<(f64, f64, f64, String)> = None;
+    let mut propagated: Vec<f64> = Vec::new();
     for a in std::env::args().skip(1) {
         match a.split_once('=') {
             Some(("layer", v)) => layer = v.into(),
@@ -40,6 +45,15 @@ fn main() {
             Some(("refine", v)) => {
                 let f: Vec<f64> = v.split(':').map(|x| x.parse().unwrap()).collect();
                 refine = Some((f[0], f[1], f[2]));
+            }
+            Some(("prop", v)) => {
+                let f: Vec<&str> = v.split(':').collect();
+                prop = Some((
+                    f[0].parse().unwrap(),
+                    f[1].parse().unwrap(),
+                    f[2].parse().unwrap(),
+                    f.get(3).unwrap_or(&"sens").to_string(),
+                ));
             }
             Some((k, _)) => panic!("unknown option {k}"),
             None => scenes.push(PathBuf::from(a)),
@@ -81,13 +95,7 @@ fn main() {
             Some(c) => c,
             None => {
                 // As `dfd-eval` runs it (`benchmark::run_method`), keeping the sensitivity.
-                let (render_layer, preset) = dlayer.layer_and_preset();
-                let mut o = template.clone();
-                o.settings = scene.settings(preset);
-                o.settings.camera.gamma = template.settings.camera.gamma;
-                o.layer = render_layer;
-                let (w8, terms) = LossCombo::L1GHssim.weights(template.weights);
-                (o.weights, o.terms) = (w8, terms);
+                let o = method_options(&scene, dlayer, LossCombo::L1GHssim, &template);
                 let r = estimate_disparity(&i.aif, &i.ground_truth, &o, &mut |_| {}).unwrap();
                 let (est, conf) = (r.disparity, r.sensitivity);
                 let bytes: Vec<u8> = est
@@ -175,7 +183,33 @@ fn main() {
             line += &format!(" REFINED {mae2:.4}");
             refined.push(mae2);
         }
+        if let Some((lambda, sig, pow, ref wt)) = prop {
+            let aif: Vec<f64> = i.aif.data.iter().map(|&v| v as f64).collect();
+            let band = occlusion_band(&est, w, h, i.blur_k, i.focus, OcclusionBand::DEFAULT);
+            let c: Vec<f64> = (0..n)
+                .map(|p| match wt.as_str() {
+                    "sens" => sens[p].powf(pow),
+                    "band" => band[p].powf(pow),
+                    _ => (sens[p] * band[p]).powf(pow),
+                })
+                .collect();
+            let out = propagate(&est, &c, &aif, w, h, lambda, sig);
+            let mae2 = out
+                .iter()
+                .zip(&i.disparity.data)
+                .map(|(e, t)| (e - *t as f64).abs())
+                .sum::<f64>()
+                / n as f64;
+            line += &format!(" PROP {mae2:.4}");
+            propagated.push(mae2);
+        }
         println!("{line}");
+    }
+    if !propagated.is_empty() {
+        println!(
+            "PROPAGATED MEAN {:.4}",
+            propagated.iter().sum::<f64>() / propagated.len() as f64
+        );
     }
     let k = maes.len() as f64;
     println!(
@@ -195,4 +229,103 @@ fn main() {
             m(|x| x.2)
         );
     }
+}
+
+/// Weighted least squares fill: minimises sum_p c_p (d_p - e_p)^2 + lambda sum_{p~q} w_pq
+/// (d_p - d_q)^2 over 4-neighbours, w_pq = exp(-|I_p - I_q|^2 / (2 sig^2)) (mean over
+/// channels), by conjugate gradients with a diagonal preconditioner.
+fn propagate(
+    e: &[f64],
+    c: &[f64],
+    aif: &[f64],
+    w: usize,
+    h: usize,
+    lambda: f64,
+    sig: f64,
+) -> Vec<f64> {
+    let n = w * h;
+    let wt = |p: usize, q: usize| {
+        let d2: f64 = (0..3)
+            .map(|k| (aif[3 * p + k] - aif[3 * q + k]).powi(2))
+            .sum::<f64>()
+            / 3.0;
+        lambda * (-d2 / (2.0 * sig * sig)).exp()
+    };
+    // right (x+1) and down (y+1) edge weights
+    let mut wr = vec![0.0; n];
+    let mut wd = vec![0.0; n];
+    for y in 0..h {
+        for x in 0..w {
+            let p = y * w + x;
+            if x + 1 < w {
+                wr[p] = wt(p, p + 1);
+            }
+            if y + 1 < h {
+                wd[p] = wt(p, p + w);
+            }
+        }
+    }
+    let diag: Vec<f64> = (0..n)
+        .map(|p| {
+            let (x, y) = (p % w, p / w);
+            let mut s = c[p] + wr[p] + wd[p];
+            if x > 0 {
+                s += wr[p - 1];
+            }
+            if y > 0 {
+                s += wd[p - w];
+            }
+            s.max(1e-12)
+        })
+        .collect();
+    let apply = |v: &[f64], out: &mut [f64]| {
+        for p in 0..n {
+            let (x, y) = (p % w, p / w);
+            let mut s = diag[p] * v[p];
+            if x + 1 < w {
+                s -= wr[p] * v[p + 1];
+            }
+            if y + 1 < h {
+                s -= wd[p] * v[p + w];
+            }
+            if x > 0 {
+                s -= wr[p - 1] * v[p - 1];
+            }
+            if y > 0 {
+                s -= wd[p - w] * v[p - w];
+            }
+            out[p] = s;
+        }
+    };
+    let b: Vec<f64> = (0..n).map(|p| c[p] * e[p]).collect();
+    let mut x = e.to_vec();
+    let mut ax = vec![0.0; n];
+    apply(&x, &mut ax);
+    let mut r: Vec<f64> = (0..n).map(|p| b[p] - ax[p]).collect();
+    let mut z: Vec<f64> = (0..n).map(|p| r[p] / diag[p]).collect();
+    let mut d = z.clone();
+    let mut rz: f64 = (0..n).map(|p| r[p] * z[p]).sum();
+    let b2: f64 = b.iter().map(|v| v * v).sum::<f64>().max(1e-30);
+    let mut ad = vec![0.0; n];
+    for _ in 0..2000 {
+        apply(&d, &mut ad);
+        let alpha = rz / (0..n).map(|p| d[p] * ad[p]).sum::<f64>();
+        for p in 0..n {
+            x[p] += alpha * d[p];
+            r[p] -= alpha * ad[p];
+        }
+        if r.iter().map(|v| v * v).sum::<f64>() < 1e-12 * b2 {
+            break;
+        }
+        for p in 0..n {
+            z[p] = r[p] / diag[p];
+        }
+        let rz2: f64 = (0..n).map(|p| r[p] * z[p]).sum();
+        let beta = rz2 / rz;
+        rz = rz2;
+        for p in 0..n {
+            d[p] = z[p] + beta * d[p];
+        }
+    }
+    x.iter().map(|v| v.clamp(0.0, 1.0)).collect()
 }

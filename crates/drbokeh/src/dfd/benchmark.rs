@@ -589,6 +589,24 @@ pub fn select_scenes(config: &DfdBenchmarkConfig) -> Result<Vec<DfdScene>> {
     Ok(scenes)
 }
 
+/// The options one optimised row runs with on `scene`: `template` with the scene's camera
+/// (`template`'s transfer gamma kept), `layer`'s rendering layer and preset, and the loss
+/// weights and structural term of `losses`.
+pub fn method_options(
+    scene: &DfdScene,
+    layer: DfdLayer,
+    losses: LossCombo,
+    template: &DfdOptions,
+) -> DfdOptions {
+    let (render_layer, preset) = layer.layer_and_preset();
+    let mut o = template.clone();
+    o.settings = scene.settings(preset);
+    o.settings.camera.gamma = template.settings.camera.gamma;
+    o.layer = render_layer;
+    (o.weights, o.terms) = losses.weights(template.weights);
+    o
+}
+
 /// Runs one method on one scene: the estimate, its confidence map (not for the constant)
 /// and its scores.
 pub fn run_method(
@@ -603,14 +621,7 @@ pub fn run_method(
             Ok((r, est, None))
         }
         DfdMethod::Optimised { layer, losses } => {
-            let (render_layer, preset) = layer.layer_and_preset();
-            let mut o = template.clone();
-            o.settings = scene.settings(preset);
-            o.settings.camera.gamma = template.settings.camera.gamma;
-            o.layer = render_layer;
-            let (w, t) = losses.weights(template.weights);
-            o.weights = w;
-            o.terms = t;
+            let o = method_options(scene, layer, losses, template);
             let r = estimate_disparity(
                 &scene.inputs.aif,
                 &scene.inputs.ground_truth,
