@@ -18,7 +18,10 @@ pub struct OptimiserArgs {
     /// Finest scale optimised: scale S is the pair halved S times (pooled in linear light)
     /// with K halved S times; the result is upsampled to full resolution. Default: the
     /// finest whose iteration stays under a cost budget (pixels x disc area of the largest
-    /// blur <= 5e6), so strongly blurred or large pairs are optimised at a coarser scale.
+    /// blur <= 5e6), so strongly blurred or large pairs are optimised at a coarser scale;
+    /// where the largest blur there is under 3 px, finer while it is and an iteration stays
+    /// under 3e7 (256 px pairs with blurs under 6 px: full resolution; docs/dfd.md "Small
+    /// blurs").
     #[arg(long, value_name = "S")]
     pub finest_scale: Option<usize>,
     /// Coarser scales optimised first, each starting the next (coarse to fine). Default 0:

@@ -40,7 +40,7 @@ mod sweep;
 pub use layers::{
     render_layer, render_layer_on, render_layer_vjp, render_layer_vjp_on, RenderLayer,
 };
-pub use log::{DfdLog, DfdNote, LogEntry, RunOptions, ScaleLog};
+pub use log::{DfdLog, DfdNote, LogEntry, RunOptions, ScaleLog, SMALL_BLUR_PX};
 pub use optimise::estimate_disparity;
 
 use crate::image::Image;
@@ -286,7 +286,9 @@ pub enum Init {
 pub struct Schedule {
     /// The finest scale optimised (0 = full resolution). `None` chooses the finest scale
     /// whose iteration costs at most [`Schedule::AUTO_FINEST_TAPS`] (pixels times the disc
-    /// area of the largest blur), keeping at least [`Schedule::MIN_SIDE`] pixels a side.
+    /// area of the largest blur), keeping at least [`Schedule::MIN_SIDE`] pixels a side;
+    /// where the largest blur there is under [`SMALL_BLUR_PX`], a finer one while it is
+    /// and an iteration costs at most [`Schedule::AUTO_FINER_TAPS`].
     pub finest_scale: Option<usize>,
     /// Coarser scales optimised before the finest one (each initialises the next).
     pub coarse_scales: usize,
@@ -320,6 +322,14 @@ impl Schedule {
     /// Cost budget of one iteration at the finest scale when [`Schedule::finest_scale`] is
     /// `None`: pixels times the disc area `pi (K max|d| + 1)^2` of the largest blur.
     pub const AUTO_FINEST_TAPS: f64 = 5.0e6;
+
+    /// Cost budget of one iteration (pixels times [`Schedule::FINE_PIXEL_TAPS`] plus the disc
+    /// area) at a scale finer than [`Schedule::AUTO_FINEST_TAPS`] allows, taken when the
+    /// largest blur there is under [`SMALL_BLUR_PX`]. A 256 px pair with a 4.9 px blur at
+    /// full resolution costs 2.4e7 (measured better there, docs/dfd.md "Small blurs"); a
+    /// 1024 px pair with a 4 px blur at 512 px costs 8.6e7 (measured no better, at 5x the
+    /// time) and stays at its coarser scale.
+    pub const AUTO_FINER_TAPS: f64 = 3.0e7;
 
     /// The cost of one iteration per pixel of a scale, in disc taps, besides the disc itself:
     /// measured on 256 px benchmark pairs at full resolution (seeds 101, 102: 18-24 s for 40
@@ -365,15 +375,26 @@ impl Schedule {
         if let Some(s) = self.finest_scale {
             return s.min(deepest);
         }
-        let mut s = 0;
-        while s < deepest {
+        let pixels = |s: usize| {
             let f = (1u64 << s) as f64;
-            let px = (width as f64 / f) * (height as f64 / f);
-            let r = max_blur_px / f + 1.0;
-            if px * std::f64::consts::PI * r * r <= Self::AUTO_FINEST_TAPS {
-                break;
-            }
+            (width as f64 / f) * (height as f64 / f)
+        };
+        let disc = |s: usize| {
+            let r = max_blur_px / (1u64 << s) as f64 + 1.0;
+            std::f64::consts::PI * r * r
+        };
+        let mut s = 0;
+        while s < deepest && pixels(s) * disc(s) > Self::AUTO_FINEST_TAPS {
             s += 1;
+        }
+        // A blur under SMALL_BLUR_PX says little about depth: go finer while it is, as long
+        // as an iteration there stays within AUTO_FINER_TAPS (docs/dfd.md, "Small blurs").
+        let blur_px = |s: usize| max_blur_px / (1u64 << s) as f64;
+        while s > 0
+            && blur_px(s) < SMALL_BLUR_PX
+            && pixels(s - 1) * (Self::FINE_PIXEL_TAPS + disc(s - 1)) <= Self::AUTO_FINER_TAPS
+        {
+            s -= 1;
         }
         s
     }
@@ -705,5 +726,26 @@ mod tests {
             ..s
         };
         assert_eq!(few.fine_iterations_for(0, 2.0), 3);
+    }
+
+    #[test]
+    fn small_blurs_are_optimised_finer_within_the_budget() {
+        let s = DfdOptions::new(RenderSettings::physical(1.0), RenderLayer::DrBokeh).schedule;
+        // The disc budget alone: 256 px with K 9 -> 128 px (blur 4.5 there, enough).
+        assert_eq!(s.finest_for(256, 256, 9.0), 1);
+        // A 4.9 px blur -> 128 px by the disc budget, where it is 2.45 px: full resolution.
+        assert_eq!(s.finest_for(256, 256, 4.9), 0);
+        // 512 px with K 10: 128 px by the disc budget (blur 2.5 px), then 256 px (5 px).
+        assert_eq!(s.finest_for(512, 512, 10.0), 1);
+        // 1024 px with K 8: 256 px (blur 2 px); 512 px would cost 8.6e7, over the budget.
+        assert_eq!(s.finest_for(1024, 1024, 8.0), 2);
+        // A large blur is left at its coarse scale.
+        assert_eq!(s.finest_for(256, 256, 20.0), 2);
+        // Given explicitly: as given.
+        let fixed = Schedule {
+            finest_scale: Some(2),
+            ..s
+        };
+        assert_eq!(fixed.finest_for(1024, 1024, 8.0), 2);
     }
 }
