@@ -117,6 +117,13 @@ fn main() {
             .map(|(e, t)| (e - *t as f64).abs())
             .collect();
         let mae = err.iter().sum::<f64>() / n as f64;
+        let mae_of = |map: &[f64]| -> f64 {
+            map.iter()
+                .zip(&i.disparity.data)
+                .map(|(e, t)| (e - *t as f64).abs())
+                .sum::<f64>()
+                / n as f64
+        };
         maes.push(mae);
         let mut line = format!("{key} K {:.1} f {:.0} MAE {mae:.4} |", i.blur_k, i.focus);
         let mut add = |name: String, c: &[f64]| {
@@ -174,12 +181,7 @@ fn main() {
                     est[p]
                 })
                 .collect();
-            let mae2 = out
-                .iter()
-                .zip(&i.disparity.data)
-                .map(|(e, t)| (e - *t as f64).abs())
-                .sum::<f64>()
-                / n as f64;
+            let mae2 = mae_of(&out);
             line += &format!(" REFINED {mae2:.4}");
             refined.push(mae2);
         }
@@ -194,12 +196,7 @@ fn main() {
                 })
                 .collect();
             let out = propagate(&est, &c, &aif, w, h, lambda, sig);
-            let mae2 = out
-                .iter()
-                .zip(&i.disparity.data)
-                .map(|(e, t)| (e - *t as f64).abs())
-                .sum::<f64>()
-                / n as f64;
+            let mae2 = mae_of(&out);
             line += &format!(" PROP {mae2:.4}");
             propagated.push(mae2);
         }

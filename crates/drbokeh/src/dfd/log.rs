@@ -236,12 +236,7 @@ impl DfdNote {
         let mut notes = Vec::new();
         let full_blur_px = blur_k * focus.max(1.0 - focus);
         let at = |s: usize| full_blur_px / (1u64 << s) as f64;
-        // Per iteration, as in `Schedule::fine_iterations_for`.
-        let cost = |s: usize| {
-            let f = (1u64 << s) as f64;
-            let disc = std::f64::consts::PI * (at(s) + 1.0).powi(2);
-            (width as f64 / f) * (height as f64 / f) * (Schedule::FINE_PIXEL_TAPS + disc)
-        };
+        let cost = |s: usize| Schedule::iteration_cost_per_pixel(s, full_blur_px);
         let blur_px = at(finest);
         if blur_px < SMALL_BLUR_PX {
             let finer = (finest > 0).then(|| {

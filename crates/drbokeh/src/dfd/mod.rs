@@ -344,6 +344,15 @@ impl Schedule {
     /// The fewest iterations [`Schedule::fine_cost_per_pixel`] leaves at the finest scale.
     pub const MIN_FINE_ITERATIONS: usize = 10;
 
+    /// The cost of one iteration at scale `scale` per full-resolution pixel of a pair with
+    /// largest blur radius `max_blur_px` (at full resolution), in disc taps:
+    /// `(FINE_PIXEL_TAPS + pi (b_s + 1)^2) / 4^s`, `b_s` the largest blur at that scale.
+    pub fn iteration_cost_per_pixel(scale: usize, max_blur_px: f64) -> f64 {
+        let f = (1u64 << scale.min(62)) as f64;
+        let r = max_blur_px / f + 1.0;
+        (Self::FINE_PIXEL_TAPS + std::f64::consts::PI * r * r) / (f * f)
+    }
+
     /// Most iterations at the finest scale `finest` for a `width x height` pair with largest
     /// blur radius `max_blur_px` (at full resolution): [`Schedule::fine_iterations`], fewer
     /// where they would cost more than [`Schedule::fine_cost_per_pixel`] per pixel of the
@@ -353,10 +362,7 @@ impl Schedule {
         let Some(budget) = self.fine_cost_per_pixel else {
             return self.fine_iterations;
         };
-        let f = (1u64 << finest.min(62)) as f64;
-        let r = max_blur_px / f + 1.0;
-        let per_iteration = (Self::FINE_PIXEL_TAPS + std::f64::consts::PI * r * r) / (f * f);
-        let cap = (budget / per_iteration).floor();
+        let cap = (budget / Self::iteration_cost_per_pixel(finest, max_blur_px)).floor();
         let cap = if cap.is_finite() && cap >= 0.0 {
             (cap.min(usize::MAX as f64) as usize).max(Self::MIN_FINE_ITERATIONS)
         } else {
@@ -392,7 +398,8 @@ impl Schedule {
         let blur_px = |s: usize| max_blur_px / (1u64 << s) as f64;
         while s > 0
             && blur_px(s) < SMALL_BLUR_PX
-            && pixels(s - 1) * (Self::FINE_PIXEL_TAPS + disc(s - 1)) <= Self::AUTO_FINER_TAPS
+            && pixels(0) * Self::iteration_cost_per_pixel(s - 1, max_blur_px)
+                <= Self::AUTO_FINER_TAPS
         {
             s -= 1;
         }
