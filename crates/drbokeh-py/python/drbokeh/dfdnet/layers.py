@@ -28,7 +28,7 @@ the display-encoded defocused image ``(B, 3, H, W)``.
   session 28 was trained through (a training step at batch 4, 128 px, about 1.2x the
   Rust layer's; docs/dfdnet.md, "Session 28").
 
-Here ``d = disparity - focus``. ``tests/test_dfdnet.py`` checks the two PyTorch baselines
+Here ``d = disparity - focus``. ``tests/test_dfdnet_layers.py`` checks the two PyTorch baselines
 against the Rust ones (``drbokeh eval``'s renders are not exposed to Python, so against a
 direct NumPy transcription of the Rust loops) and their gradients with ``gradcheck``.
 """

@@ -2,7 +2,7 @@
 (supplement eq. 10, sec. 3.2).
 
 They follow the definitions of the Rust ``loss`` module (``crates/drbokeh/src/loss/``)
-term for term; ``tests/test_dfdnet.py`` checks them against those written formulas,
+term for term; ``tests/test_dfdnet_losses.py`` checks them against those written formulas,
 computed independently with NumPy loops:
 
 - ``l1``: the mean of ``|pred - target|`` over every value (pixels and channels).

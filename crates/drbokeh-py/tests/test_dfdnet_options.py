@@ -1,0 +1,168 @@
+"""drbokeh.dfdnet's command line: run names, the table's and --quick's settings, named
+protocols, --min-blur, the shared data cache and its one-line errors, and help that teaches."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+
+def test_run_names_round_trip():
+    from drbokeh.dfdnet.train import TABLE_RUNS, parse_run
+
+    for spec in TABLE_RUNS:
+        assert parse_run(spec.name) == spec
+    assert parse_run("physical-hssim-none").highlights == "none"
+    with pytest.raises(ValueError, match="unknown run"):
+        parse_run("physical-hssim-bright")
+
+
+def test_unset_options_take_the_table_protocol_or_quick_settings():
+    """The table's defaults (session 11's protocol: whole images, batch 2, 1500 steps,
+    the far start, textured backgrounds); --quick keeps its own small settings; what the
+    user gives wins; --init-disparity takes a disparity in (0, 1) or 'pytorch'."""
+    from drbokeh.dfdnet.__main__ import _cfg, parse_args
+
+    a = parse_args(["reproduce", "--out", "o"])
+    cfg = _cfg(a)
+    assert (cfg.steps, cfg.batch, cfg.crop, cfg.init_disparity) == (1500, 2, 128, 0.05)
+    assert (a.size, a.background_detail) == (128, 1.0)
+    q = parse_args(["train", "--quick", "--out", "o"])
+    assert (q.size, q.steps, q.batch, q.crop, q.init_disparity, q.background_detail) == (64, 40, 4, 64, None, 0.0)
+    b = parse_args(["train", "--out", "o", "--size", "192", "--crop", "96", "--init-disparity", "pytorch",
+                    "--background-detail", "0"])
+    cfg = _cfg(b)
+    assert (cfg.crop, cfg.init_disparity, b.background_detail) == (96, None, 0.0)
+    assert parse_args(["eval", "--out", "o", "--size", "192"]).crop == 192
+    for bad in ("1.5", "0", "far"):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", "--init-disparity", bad])
+
+
+def test_a_named_protocol_is_the_long_command_line_and_given_options_win():
+    """``--protocol session29`` gives exactly the settings of the long command line that
+    docs/dfdnet.md ran for its current table (session 30's run24.sh); an option given
+    beside it wins; session12 is the options' own defaults; --quick and an unknown name
+    are refused."""
+    from drbokeh.dfdnet.__main__ import _cfg, _runs, parse_args
+
+    long = ["reproduce", "--data", "D4s", "--perspective", "--train-scenes", "960", "--val-scenes", "64",
+            "--test-scenes", "128", "--min-blur", "3", "--batch", "4", "--inputs", "aif", "--init-disparity", "0.15",
+            "--focus-prior", "4", "--focus-prior-radius", "1", "--seed", "24", "--jobs", "2", "--out", "R24",
+            "--runs", "physical5-hssim,physical5-ssim,physical5-l1g,paper5-hssim,aperture-hssim,gausspsf-hssim,"
+            "supervised"]
+    short = parse_args(["reproduce", "--protocol", "session29", "--data", "D4s", "--seed", "24", "--out", "R24"])
+    full = parse_args(long)
+    assert {**vars(short), "protocol": None} == {**vars(full), "protocol": None}
+    assert _cfg(short) == _cfg(full) and _runs(short) == _runs(full)
+    assert (short.protocol, full.protocol) == ("session29", "session12")
+    # what is given wins, in any order
+    wider = parse_args(["eval", "--test-scenes", "512", "--protocol", "session29", "--out", "X", "--min-blur", "2"])
+    assert (wider.test_scenes, wider.min_blur, wider.train_scenes, wider.perspective) == (512, 2.0, 960, True)
+    assert vars(parse_args(["train", "--protocol", "session12", "--out", "o"])) == {
+        **vars(parse_args(["train", "--out", "o"])), "protocol": "session12"}
+    for bad in (["train", "--quick", "--protocol", "session29", "--out", "o"],
+                ["reproduce", "--protocol", "session30", "--out", "o"]):
+        with pytest.raises(SystemExit):
+            parse_args(bad)
+
+
+def test_min_blur_keeps_the_scenes_with_enough_blur_in_every_split():
+    """--min-blur leaves out, in every split, the scenes whose largest blur K is below it
+    (their arrays and names together); 0 keeps all; a split left empty, a negative or a
+    non-finite threshold is an error."""
+    from drbokeh.dfdnet.data import Split, with_min_blur
+
+    def split(blurs):
+        n = len(blurs)
+        return Split(np.arange(n * 3 * 4, dtype=np.float32).reshape(n, 3, 2, 2), np.zeros((n, 3, 2, 2), np.float32),
+                     np.zeros((n, 1, 2, 2), np.float32), np.zeros(n, np.float32), np.array(blurs, np.float32),
+                     np.ones(n), np.ones(n), [f"s{i}" for i in range(n)])
+
+    splits = {"train": split([1.0, 3.0, 9.0, 2.9]), "test": split([3.0, 1.5])}
+    kept = with_min_blur(splits, 3.0)
+    assert kept["train"].names == ["s1", "s2"] and kept["test"].names == ["s0"]
+    assert np.array_equal(kept["train"].aif, splits["train"].aif[[1, 2]])
+    assert np.array_equal(kept["train"].blur, [3.0, 9.0])
+    assert [len(v) for v in with_min_blur(splits, 0.0).values()] == [4, 2]
+    with pytest.raises(ValueError, match="no test scene"):
+        with_min_blur(splits, 5.0)
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="minimum blur"):
+            with_min_blur(splits, bad)
+    # A cache traced with a threshold serves that threshold or more, never less.
+    traced = {"train": split([3.0, 9.0])}
+    traced["train"].traced_min_blur = 3.0
+    assert with_min_blur(traced, 4.0)["train"].names == ["s1"]
+    assert with_min_blur(traced, 4.0)["train"].traced_min_blur == 3.0
+    for less in (0.0, 2.5):
+        with pytest.raises(ValueError, match=r"holds only scenes with K >= 3.0 px"):
+            with_min_blur(traced, less)
+    from drbokeh.dfdnet.__main__ import parse_args
+
+    assert parse_args(["train", "--out", "o"]).min_blur == 0.0
+    assert parse_args(["eval", "--out", "o", "--min-blur", "3"]).min_blur == 3.0
+    for bad in ("-1", "nan", "inf", "three"):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", "--min-blur", bad])
+
+
+def test_data_cache_is_shared_safely_and_a_damaged_one_is_a_one_line_error(tmp_path):
+    """The cache record (``splits.json``) is written only when it changes, so processes
+    sharing ``--data`` (training and eval side by side) never read it half-written; a
+    damaged record or cached split is a ValueError naming the file (at the command line,
+    one line, exit status not 0), before any tracing."""
+    from drbokeh.dfdnet.__main__ import main
+    from drbokeh.dfdnet.data import Split, SplitSpec, _save, prepare
+
+    spec = SplitSpec("train", 1711, 2, 16, 4, "far")
+    n = 2
+    split = Split(np.zeros((n, 3, 16, 16), np.float32), np.zeros((n, 3, 16, 16), np.float32),
+                  np.zeros((n, 1, 16, 16), np.float32), np.zeros(n, np.float32), np.full(n, 3.0, np.float32),
+                  np.ones(n), np.ones(n), ["a", "b"])
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    _save(split, cache / "train.npz")
+    loaded = prepare(cache, [spec], cli="/nonexistent/drbokeh")["train"]  # cached: never traced
+    assert loaded.names == ["a", "b"] and np.array_equal(loaded.blur, split.blur)
+    record = cache / "splits.json"
+    stamp = record.stat().st_mtime_ns
+    os.utime(record, ns=(stamp - 10**9, stamp - 10**9))
+    prepare(cache, [spec], cli="/nonexistent/drbokeh")
+    assert record.stat().st_mtime_ns == stamp - 10**9, "an unchanged record was written again"
+    assert sorted(p.name for p in cache.iterdir()) == ["splits.json", "train.npz"], "a temporary file was left"
+
+    good = (cache / "train.npz").read_bytes()
+    for damaged in (good[: len(good) // 2], b"not an npz"):
+        (cache / "train.npz").write_bytes(damaged)
+        with pytest.raises(ValueError, match="train.npz: not a cached split"):
+            prepare(cache, [spec], cli="/nonexistent/drbokeh")
+    for bad in ("", "{", "7", '["x"]'):
+        record.write_text(bad)
+        with pytest.raises(ValueError, match="splits.json: not a record of splits"):
+            prepare(cache, [spec], cli="/nonexistent/drbokeh")
+        with pytest.raises(SystemExit) as exit_info:
+            main(["eval", "--data", str(cache), "--out", str(tmp_path / "o"), "--drbokeh", "/nonexistent/drbokeh"])
+        message = str(exit_info.value.code)
+        assert message.startswith("--data: ") and "splits.json" in message and "\n" not in message
+
+
+@pytest.mark.parametrize("cmd", [[], ["train"], ["eval"], ["reproduce"], ["table"]])
+def test_every_help_teaches_with_examples(cmd, capsys):
+    """`--help` of the program and of each command prints its description and examples
+    that name that command (the CLI's rule: help that teaches)."""
+    from drbokeh.dfdnet.__main__ import parse_args
+
+    with pytest.raises(SystemExit) as exit_info:
+        parse_args(cmd + ["--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    assert "examples:" in text
+    example_lines = [ln for ln in text.splitlines() if ln.strip().startswith("python -m drbokeh.dfdnet ")]
+    assert len(example_lines) >= 2
+    if cmd:
+        assert all(f"drbokeh.dfdnet {cmd[0]} " in ln for ln in example_lines)
