@@ -16,6 +16,12 @@ import pytest
 REPO = Path(__file__).resolve().parents[3]
 
 
+def _rand(seed: int, *shape: int) -> np.ndarray:
+    """Uniform values in [0.05, 0.95] of the given shape, from a seeded generator (the
+    dfdnet tests' random images and disparities)."""
+    return np.random.default_rng(seed).uniform(0.05, 0.95, size=shape)
+
+
 def _find_cli() -> Path:
     """The `drbokeh` binary: $DRBOKEH_CLI, else built from this checkout (release)."""
     env = os.environ.get("DRBOKEH_CLI")

@@ -555,6 +555,9 @@ def test_textured_mask_is_the_local_luminance_std():
     assert np.array_equal(got, want) and got[0].any() and not got[1].any()
 
 
+# ---- the focus prior's warm-up in training ----------------------------------------------------
+
+
 def test_focus_prior_warmup_falls_linearly_to_the_prior_and_training_follows_it(tmp_path):
     """``--focus-prior-warmup WEIGHT:STEPS``: the prior's weight starts at WEIGHT and falls
     on a straight line to ``--focus-prior`` at step STEPS, then stays; training uses each

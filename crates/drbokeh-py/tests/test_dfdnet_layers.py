@@ -12,12 +12,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from conftest import _rand  # noqa: E402
 from drbokeh.dfdnet import layers  # noqa: E402
-
-
-def _rand(seed, *shape):
-    return np.random.default_rng(seed).uniform(0.05, 0.95, size=shape)
-
 
 
 # ---- layers: NumPy transcriptions of crates/drbokeh/src/baselines ---------------------------

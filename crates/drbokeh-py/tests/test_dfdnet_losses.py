@@ -11,12 +11,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from conftest import _rand  # noqa: E402
 from drbokeh.dfdnet import layers, losses  # noqa: E402
-
-
-def _rand(seed, *shape):
-    return np.random.default_rng(seed).uniform(0.05, 0.95, size=shape)
-
 
 
 # ---- losses -------------------------------------------------------------------------------
