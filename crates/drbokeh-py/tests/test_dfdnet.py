@@ -328,7 +328,8 @@ def test_eval_can_score_only_the_layouts_a_smaller_test_set_lacks(tmp_path):
     same all-in-focus image and disparity), every shared index is left out, each kept scene
     scores as in the eval of the whole larger split, and the header says what was left out.
     A DIR without results.json, or of another test seed, is refused in one line. Training
-    starts the costliest runs first. Tiny scenes (32 px, 4 spp), 2 steps."""
+    starts the costliest runs first; eval traces the test split alone. Tiny scenes (32 px,
+    4 spp), 2 steps."""
     from drbokeh.dfdnet.data import _load, scene_index
 
     env = dict(os.environ, DRBOKEH_CLI=str(_find_cli()))
@@ -345,10 +346,7 @@ def test_eval_can_score_only_the_layouts_a_smaller_test_set_lacks(tmp_path):
     log = dfdnet("reproduce", "--data", str(tmp_path / "D"), "--out", str(small), "--test-scenes", "8",
                  "--runs", "supervised,aperture-l1g,gausspsf-l1g")
     assert "training order (the longest first): gausspsf-l1g, aperture-l1g, supervised" in log
-    big = tmp_path / "D2"  # the larger test split; train and validation as traced for R
-    big.mkdir()
-    for name in ("train", "val"):
-        (big / f"{name}.npz").symlink_to(tmp_path / "D" / f"{name}.npz")
+    big = tmp_path / "D2"  # the larger test split, in a directory of its own
     for d in (whole, new):
         d.mkdir()
         for run in ("aperture-l1g", "gausspsf-l1g"):
@@ -356,6 +354,8 @@ def test_eval_can_score_only_the_layouts_a_smaller_test_set_lacks(tmp_path):
     big_args = ["--data", str(big), "--test-scenes", "24", "--runs", "aperture-l1g,gausspsf-l1g"]
     dfdnet("eval", "--out", str(whole), *big_args)
     dfdnet("eval", "--out", str(new), *big_args, "--exclude-scenes-of", str(small))
+    # eval reads the test split alone: the larger one is traced, train and validation are not
+    assert sorted(p.name for p in big.iterdir()) == ["splits.json", "test", "test.npz"]
     w, e = (json.loads((d / "results.json").read_text()) for d in (whole, new))
     old = {scene_index(n) for n in json.loads((small / "results.json").read_text())["test_scenes"]}
     shared = [n for n in w["test_scenes"] if scene_index(n) in old]

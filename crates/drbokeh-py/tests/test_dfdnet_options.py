@@ -3,6 +3,7 @@ protocols, --min-blur, the shared data cache and its one-line errors, and help t
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -135,6 +136,17 @@ def test_data_cache_is_shared_safely_and_a_damaged_one_is_a_one_line_error(tmp_p
     prepare(cache, [spec], cli="/nonexistent/drbokeh")
     assert record.stat().st_mtime_ns == stamp - 10**9, "an unchanged record was written again"
     assert sorted(p.name for p in cache.iterdir()) == ["splits.json", "train.npz"], "a temporary file was left"
+    # only: the splits named, the others neither traced nor loaded (the missing val would be
+    # traced, and fail with this CLI); the record holds every split's spec
+    val, two = SplitSpec("val", 1712, 2, 16, 4, "far"), tmp_path / "two"
+    two.mkdir()
+    _save(split, two / "train.npz")
+    assert list(prepare(two, [spec, val], cli="/nonexistent/drbokeh", only=("train",))) == ["train"]
+    assert [r["name"] for r in json.loads((two / "splits.json").read_text())] == ["train", "val"]
+    with pytest.raises(ValueError, match="no split named test"):
+        prepare(two, [spec, val], cli="/nonexistent/drbokeh", only=("test",))
+    with pytest.raises(FileNotFoundError):  # val is missing: traced
+        prepare(two, [spec, val], cli="/nonexistent/drbokeh")
 
     good = (cache / "train.npz").read_bytes()
     for damaged in (good[: len(good) // 2], b"not an npz"):

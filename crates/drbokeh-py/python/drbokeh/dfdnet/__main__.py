@@ -20,9 +20,9 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -219,13 +219,14 @@ def _runs(a: argparse.Namespace) -> List[RunSpec]:
         raise SystemExit(f"--runs: {e}")
 
 
-def _splits(a: argparse.Namespace) -> Dict[str, Split]:
-    """Every split, traced into --data if missing, with the scenes below --min-blur left out.
-    Tracing uses the cores the trainings will (``--jobs`` x ``--threads``); its bytes do not
-    depend on the thread count."""
+def _splits(a: argparse.Namespace, only: Optional[Sequence[str]] = None) -> Dict[str, Split]:
+    """Every split (or those named in ``only``), traced into --data if missing, with the
+    scenes below --min-blur left out. Tracing uses the cores the trainings will (``--jobs`` x
+    ``--threads``); its bytes do not depend on the thread count."""
     trace_threads = a.threads * max(1, a.jobs)
     try:
-        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, trace_threads, _log, min_blur=a.min_blur)
+        splits = prepare(a.data or a.out / "data", _specs(a), a.drbokeh, trace_threads, _log, min_blur=a.min_blur,
+                         only=only)
     except ValueError as e:
         raise SystemExit(f"--data: {e}")
     try:
@@ -303,8 +304,9 @@ def _exclusion(a: argparse.Namespace) -> Exclusion:
 
 
 def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig, exclusion: Exclusion) -> None:
-    """The eval, on the test split without ``exclusion``'s scenes (:func:`_exclusion`)."""
-    splits = _splits(a)
+    """The eval, on the test split without ``exclusion``'s scenes (:func:`_exclusion`). It
+    reads (and, if missing, traces) the test split alone."""
+    splits = _splits(a, only=("test",))
     left_out = ""
     if exclusion is not None:
         indices, d = exclusion
@@ -412,7 +414,8 @@ and DIR/RUN/log.json; the data is traced into --data (default DIR/data) once and
   python -m drbokeh.dfdnet eval --data D2 --test-scenes 512 --out E --exclude-scenes-of R   # new layouts only
 
 Evaluates the runs trained in DIR on the test split: DIR/results.md and results.json,
-DIR/index.html with the test images, DIR/plots/*.svg (loss curves, validation MAE).""",
+DIR/index.html with the test images, DIR/plots/*.svg (loss curves, validation MAE).
+It reads only the test split of --data, and traces only that split if it is missing.""",
     "table": """examples:
   python -m drbokeh.dfdnet table R17 R18 R19 -o T     # R17..R19: eval outputs of seeds 17-19
   python -m drbokeh.dfdnet table P17 P18 -o T2         # two seeds are enough to run it

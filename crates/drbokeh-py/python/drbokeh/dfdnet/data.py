@@ -205,14 +205,20 @@ def _load(path: Path) -> Split:
 
 def prepare(
     data_dir: Path, specs: Sequence[SplitSpec], cli: Optional[str] = None, threads: int = 1, log=print,
-    min_blur: float = 0.0,
+    min_blur: float = 0.0, only: Optional[Sequence[str]] = None,
 ) -> Dict[str, Split]:
     """Makes (if missing) and loads every split, cached as ``data_dir/<name>.npz``; the
-    ray-traced scenes stay in ``data_dir/<name>/``. A split made here traces only the scenes
+    ray-traced scenes stay in ``data_dir/<name>/``. With ``only``, just the splits of those
+    names are made and loaded (``eval`` needs the test split alone: a larger test split in a
+    new directory then traces nothing else). A split made here traces only the scenes
     with blur K >= ``min_blur`` px (the cache records it; :func:`with_min_blur` refuses a
     smaller threshold on it). ``data_dir/splits.json`` records the
-    specs; a cache made with other specs is an error (delete it or use another
-    directory)."""
+    specs, all of them whatever ``only`` says; a cache made with other specs is an error
+    (delete it or use another directory)."""
+    if only is not None:
+        unknown = sorted(set(only) - {s.name for s in specs})
+        if unknown:
+            raise ValueError(f"no split named {', '.join(unknown)} (splits: {', '.join(s.name for s in specs)})")
     data_dir.mkdir(parents=True, exist_ok=True)
     record = data_dir / "splits.json"
     want = [s.__dict__ for s in specs]
@@ -236,6 +242,8 @@ def prepare(
         tmp.replace(record)
     out: Dict[str, Split] = {}
     for spec in specs:
+        if only is not None and spec.name not in only:
+            continue
         cache = data_dir / f"{spec.name}.npz"
         if not cache.exists():
             import time
