@@ -178,3 +178,14 @@ def test_every_help_teaches_with_examples(cmd, capsys):
     assert len(example_lines) >= 2
     if cmd:
         assert all(f"drbokeh.dfdnet {cmd[0]} " in ln for ln in example_lines)
+
+
+def test_training_progress_says_how_long_is_left():
+    """The progress line's estimate: the recent seconds per step times the steps left, in
+    minutes from one minute up, nothing after the last step."""
+    from drbokeh.dfdnet.train import time_left
+
+    assert time_left(1.6, 1200) == ", about 32 min left"
+    assert time_left(0.5, 100) == ", about 50 s left"
+    assert time_left(2.0, 30) == ", about 1 min left"
+    assert time_left(1.6, 0) == ""

@@ -263,6 +263,15 @@ def image_loss(
     return total, terms
 
 
+def time_left(seconds_per_step: float, steps_left: int) -> str:
+    """``", about 12 min left"`` at ``seconds_per_step`` (the recent steps' mean) for the
+    ``steps_left``; empty when none are left. Whole minutes from one, seconds below."""
+    if steps_left <= 0:
+        return ""
+    left = seconds_per_step * steps_left
+    return f", about {left / 60:.0f} min left" if left >= 60 else f", about {left:.0f} s left"
+
+
 def train_run(
     spec: RunSpec,
     splits: Dict[str, Split],
@@ -312,8 +321,9 @@ def train_run(
         if (step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps:
             mae = float(np.abs(predict(model, cfg.input_of(val.aif, val.bokeh)) - val.disparity).mean())
             val_curve.append({"step": step + 1, "val_mae": mae})
+            recent = float(np.mean(step_seconds[-cfg.eval_every:]))
             log(f"{spec.name}: step {step + 1}/{cfg.steps} loss {float(loss.detach()):.4f} val MAE {mae:.4f} "
-                f"({np.mean(step_seconds[-cfg.eval_every:]):.2f} s/step)")
+                f"({recent:.2f} s/step{time_left(recent, cfg.steps - step - 1)})")
     steps_per_epoch = n / cfg.batch
     result: Dict[str, object] = {
         "run": spec.name,
