@@ -153,12 +153,15 @@ def test_data_cache_is_shared_safely_and_a_damaged_one_is_a_one_line_error(tmp_p
         (cache / "train.npz").write_bytes(damaged)
         with pytest.raises(ValueError, match="train.npz: not a cached split"):
             prepare(cache, [spec], cli="/nonexistent/drbokeh")
+    (tmp_path / "o" / "physical-hssim").mkdir(parents=True)
+    (tmp_path / "o" / "physical-hssim" / "model.pt").touch()  # a run for eval (never read: the data fails first)
     for bad in ("", "{", "7", '["x"]'):
         record.write_text(bad)
         with pytest.raises(ValueError, match="splits.json: not a record of splits"):
             prepare(cache, [spec], cli="/nonexistent/drbokeh")
         with pytest.raises(SystemExit) as exit_info:
-            main(["eval", "--data", str(cache), "--out", str(tmp_path / "o"), "--drbokeh", "/nonexistent/drbokeh"])
+            main(["eval", "--data", str(cache), "--out", str(tmp_path / "o"), "--runs", "physical-hssim",
+                  "--drbokeh", "/nonexistent/drbokeh"])
         message = str(exit_info.value.code)
         assert message.startswith("--data: ") and "splits.json" in message and "\n" not in message
 
@@ -189,3 +192,36 @@ def test_training_progress_says_how_long_is_left():
     assert time_left(0.5, 100) == ", about 50 s left"
     assert time_left(2.0, 30) == ", about 1 min left"
     assert time_left(1.6, 0) == ""
+
+
+@pytest.mark.parametrize("option, bad", [
+    ("--steps", "-5"), ("--steps", "0"), ("--batch", "0"), ("--base", "0"), ("--size", "-128"), ("--spp", "0"),
+    ("--train-scenes", "0"), ("--test-scenes", "ten"), ("--threads", "0"), ("--jobs", "0"), ("--crop", "0"),
+    ("--lr", "0"), ("--lr", "nan"), ("--lr", "-1e-3"), ("--focus-prior", "-1"), ("--focus-prior", "inf"),
+])
+def test_a_number_out_of_range_is_refused_in_one_line(option, bad, capsys):
+    """Counts below 1, a learning rate that is not > 0 and a negative or infinite weight are
+    refused when the command line is read (before tracing or training: `--steps -5` once
+    "trained" every run for no step and wrote NaN into its log), naming the option."""
+    from drbokeh.dfdnet.__main__ import parse_args
+
+    with pytest.raises(SystemExit) as e:
+        parse_args(["train", "--out", "o", f"{option}={bad}"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert option in err and repr(bad) in err, err
+
+
+def test_eval_without_a_trained_run_says_so_before_tracing(tmp_path):
+    """``eval --out DIR`` where DIR holds none of the runs asked for: one line naming DIR,
+    exit status not 0, nothing traced (the CLI given does not exist) and nothing written."""
+    from drbokeh.dfdnet.__main__ import main
+
+    out, data = tmp_path / "nothing", tmp_path / "data"
+    with pytest.raises(SystemExit) as e:
+        main(["eval", "--out", str(out), "--data", str(data), "--runs", "physical-hssim,aperture-hssim",
+              "--drbokeh", "/nonexistent/drbokeh"])
+    message = str(e.value.code)
+    assert message.startswith("eval: no run of physical-hssim, aperture-hssim is trained in") and str(out) in message
+    assert "\n" not in message
+    assert not out.exists() and not data.exists()

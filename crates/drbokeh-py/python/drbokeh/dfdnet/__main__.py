@@ -73,6 +73,39 @@ def _init_arg(text: str) -> object:
     return v
 
 
+def _count_arg(text: str) -> int:
+    """A count (steps, images, scenes, pixels, threads, jobs, channels): an integer >= 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 1") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 1")
+    return v
+
+
+def _rate_arg(text: str) -> float:
+    """``--lr``: a finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a learning rate > 0, e.g. 0.004") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a learning rate > 0, e.g. 0.004")
+    return v
+
+
+def _weight_arg(text: str) -> float:
+    """A loss weight: a finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a weight >= 0") from None
+    if not math.isfinite(v) or v < 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a weight >= 0")
+    return v
+
+
 def _min_blur_arg(text: str) -> float:
     try:
         v = float(text)
@@ -136,8 +169,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--protocol", choices=tuple(PROTOCOLS), default="session12", help=PROTOCOL_HELP)
     p.add_argument("--data", type=Path, help="data cache directory (default OUT/data); scenes are made there if missing")
     p.add_argument("--drbokeh", help="the drbokeh command line (default $DRBOKEH_CLI, PATH, or this checkout's target/release)")
-    p.add_argument("--size", type=int, default=SIZE, help=f"scene size, px (default {SIZE}; {QUICK_SIZE} with --quick)")
-    p.add_argument("--spp", type=int, default=144, help="samples per pixel of the traced images (default 144)")
+    p.add_argument("--size", type=_count_arg, default=SIZE, help=f"scene size, px (default {SIZE}; {QUICK_SIZE} with --quick)")
+    p.add_argument("--spp", type=_count_arg, default=144, help="samples per pixel of the traced images (default 144)")
     p.add_argument("--focus", choices=tuple(FOCUS), default="far",
                    help="far (default): scenes focused on the background, d >= 0; near: on the nearest billboard, d <= 0 (docs/dfdnet.md)")
     p.add_argument("--background-detail", type=float, default=None, metavar="STRENGTH",
@@ -151,18 +184,18 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-blur", type=_min_blur_arg, default=0.0, metavar="K_PX",
                    help="keep only scenes whose largest blur K is at least K_PX pixels, in every split "
                         "(default 0: all; the scenes are traced and cached as without it)")
-    p.add_argument("--train-scenes", type=int, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
-    p.add_argument("--val-scenes", type=int, default=32)
-    p.add_argument("--test-scenes", type=int, default=64)
-    p.add_argument("--threads", type=int, default=1, help="torch and renderer threads per run (default 1: on a shared machine two processes of one thread beat one of two); tracing the data uses --jobs x --threads")
-    p.add_argument("--steps", type=int, default=None,
+    p.add_argument("--train-scenes", type=_count_arg, default=240, help="scenes traced for training (default 240; with far focus about half are kept)")
+    p.add_argument("--val-scenes", type=_count_arg, default=32)
+    p.add_argument("--test-scenes", type=_count_arg, default=64)
+    p.add_argument("--threads", type=_count_arg, default=1, help="torch and renderer threads per run (default 1: on a shared machine two processes of one thread beat one of two); tracing the data uses --jobs x --threads")
+    p.add_argument("--steps", type=_count_arg, default=None,
                    help=f"training steps per run (default {TrainConfig.steps}; {QUICK['steps']} with --quick)")
-    p.add_argument("--batch", type=int, default=None,
+    p.add_argument("--batch", type=_count_arg, default=None,
                    help=f"images per step (default {TrainConfig.batch}; {QUICK['batch']} with --quick)")
-    p.add_argument("--crop", type=int, default=None,
+    p.add_argument("--crop", type=_count_arg, default=None,
                    help=f"training crop side, a multiple of 16 (default: the whole scene, --size; {QUICK['crop']} with --quick)")
-    p.add_argument("--base", type=int, default=TrainConfig.base, help=f"U-Net width (default {TrainConfig.base}: about 1.1 M parameters)")
-    p.add_argument("--lr", type=float, default=TrainConfig.lr)
+    p.add_argument("--base", type=_count_arg, default=TrainConfig.base, help=f"U-Net width (default {TrainConfig.base}: about 1.1 M parameters)")
+    p.add_argument("--lr", type=_rate_arg, default=TrainConfig.lr)
     p.add_argument("--seed", type=int, default=TrainConfig.seed,
                    help=f"initial weights and batch order (default {TrainConfig.seed}); every run of one command shares it")
     p.add_argument("--highlights", choices=HIGHLIGHTS, default=TrainConfig.highlights,
@@ -173,7 +206,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inputs", choices=INPUTS, default=TrainConfig.inputs,
                    help="what the network sees: the all-in-focus image (default, depth from one image; the defocused "
                         "image is only the loss's target) or 'aif+bokeh', the defocused image beside it (depth from the pair)")
-    p.add_argument("--focus-prior", type=float, default=TrainConfig.w_focus, metavar="WEIGHT",
+    p.add_argument("--focus-prior", type=_weight_arg, default=TrainConfig.w_focus, metavar="WEIGHT",
                    help="weight of a prior for the least defocus: WEIGHT x mean |disparity - focus| (default 0: off; docs/dfdnet.md)")
     p.add_argument("--focus-prior-warmup", type=_warmup_arg, default=None, metavar="WEIGHT:STEPS",
                    help="start the focus prior at WEIGHT and lower it linearly to --focus-prior over the first STEPS "
@@ -182,7 +215,7 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="apply the focus prior only inside the depth of field: each pixel's term is capped at PX / K, so "
                         "it stops pulling once the predicted blur radius K |disparity - focus| reaches PX pixels "
                         "(default: everywhere; e.g. 1; session 24: docs/dfdnet.md)")
-    p.add_argument("--jobs", type=int, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
+    p.add_argument("--jobs", type=_count_arg, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
     p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised; layers: " + ", ".join(LAYERS)
                    + "; losses: " + ", ".join(LOSSES) + "); default: the table: " + ",".join(r.name for r in TABLE_RUNS))
 
@@ -305,7 +338,14 @@ def _exclusion(a: argparse.Namespace) -> Exclusion:
 
 def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig, exclusion: Exclusion) -> None:
     """The eval, on the test split without ``exclusion``'s scenes (:func:`_exclusion`). It
-    reads (and, if missing, traces) the test split alone."""
+    reads (and, if missing, traces) the test split alone. Runs not trained in --out are left
+    out and named; none trained is an error, before any tracing."""
+    missing = [spec.name for spec in runs if not (a.out / spec.name / "model.pt").is_file()]
+    if len(missing) == len(runs):
+        raise SystemExit(f"eval: no run of {', '.join(missing)} is trained in {a.out} (train writes "
+                         f"{a.out}/RUN/model.pt: give eval the --out that train had)")
+    if missing:
+        _log(f"eval: not trained in {a.out}, left out: {', '.join(missing)}")
     splits = _splits(a, only=("test",))
     left_out = ""
     if exclusion is not None:
