@@ -225,3 +225,21 @@ def test_eval_without_a_trained_run_says_so_before_tracing(tmp_path):
     assert message.startswith("eval: no run of physical-hssim, aperture-hssim is trained in") and str(out) in message
     assert "\n" not in message
     assert not out.exists() and not data.exists()
+
+
+@pytest.mark.parametrize("cmd", [["train", "--runs", "supervised"], ["train", "--quick"], ["eval"], ["reproduce"]])
+def test_a_file_where_a_directory_belongs_is_refused_in_one_line(cmd, tmp_path):
+    """--out or --data naming an existing file: one line naming the option and the path, the
+    file left as it was, nothing traced (the CLI given does not exist)."""
+    from drbokeh.dfdnet.__main__ import main
+
+    f = tmp_path / "a-file"
+    f.write_bytes(b"keep me")
+    for option, more in (("--out", []), ("--data", ["--out", str(tmp_path / "o")])):
+        with pytest.raises(SystemExit) as e:
+            main([*cmd, option, str(f), *more, "--drbokeh", "/nonexistent/drbokeh"])
+        assert str(e.value.code) == f"{option} {f}: exists and is not a directory"
+        assert f.read_bytes() == b"keep me" and not (tmp_path / "o").exists()
+    with pytest.raises(SystemExit) as e:
+        main(["table", str(tmp_path / "x"), str(tmp_path / "y"), "-o", str(f)])
+    assert str(e.value.code) == f"--out {f}: exists and is not a directory"

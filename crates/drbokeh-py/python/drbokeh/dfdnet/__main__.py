@@ -527,8 +527,27 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     return a
 
 
+def _check_directories(a: argparse.Namespace) -> None:
+    """--out (and --data) must be directories or not exist yet: a file there is refused in
+    one line before anything is traced, trained or written."""
+    for option, path in (("--out", a.out), ("--data", getattr(a, "data", None))):
+        if path is not None and path.exists() and not path.is_dir():
+            raise SystemExit(f"{option} {path}: exists and is not a directory")
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     a = parse_args(argv)
+    _check_directories(a)
+    try:
+        return _run(a)
+    except OSError as e:
+        # at the command line's edge: a directory that cannot be made or a file that cannot
+        # be written (permissions, a full disk) in one line, not a traceback
+        where = f"{e.filename}: " if e.filename else ""
+        raise SystemExit(f"error: {where}{e.strerror or e}") from None
+
+
+def _run(a: argparse.Namespace) -> int:
     if a.cmd == "table":
         _write_table(a.dirs, a.out)
         return 0
