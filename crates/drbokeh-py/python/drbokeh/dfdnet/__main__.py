@@ -22,7 +22,7 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -47,7 +47,7 @@ QUICK = {"steps": 40, "batch": 4, "crop": 64, "background_detail": 0.0, "init_di
 # (docs/dfdnet.md): scenes with a depth cue, four times the training scenes, only scenes
 # with K >= 3 px, batches of 4, a start of 0.15, the focus prior inside the depth of
 # field, and the runs with the five-layer stacks, the loss ablation and the supervised bound.
-PROTOCOLS: Dict[str, Dict[str, object]] = {
+PROTOCOLS: Dict[str, Dict[str, Any]] = {
     "session12": {},
     "session29": {
         "perspective": True, "train_scenes": 960, "val_scenes": 64, "test_scenes": 128, "min_blur": 3.0,
@@ -235,9 +235,9 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
                        vertical_flips=not a.perspective, **_prior_fields(a))
 
 
-def _prior_fields(a: argparse.Namespace) -> Dict[str, object]:
+def _prior_fields(a: argparse.Namespace) -> Dict[str, Any]:
     """The focus prior's ``TrainConfig`` fields from the command line (weight, radius, warm-up)."""
-    fields: Dict[str, object] = {"w_focus": a.focus_prior, "focus_prior_radius_px": a.focus_prior_radius}
+    fields: Dict[str, Any] = {"w_focus": a.focus_prior, "focus_prior_radius_px": a.focus_prior_radius}
     if a.focus_prior_warmup is not None:
         fields["w_focus_start"], fields["focus_warmup_steps"] = a.focus_prior_warmup
     return fields
@@ -407,7 +407,7 @@ def _quick(a: argparse.Namespace) -> None:
     splits = prepare(a.data or a.out / "data", specs, a.drbokeh, a.threads, _log)
     spec = RunSpec("physical", "hssim")
     r = train_run(spec, splits, cfg, a.out, _log)
-    losses = [c["loss"] for c in r["curve"]]  # type: ignore[union-attr]
+    losses = [c["loss"] for c in r["curve"]]
     n = max(1, len(losses) // 5)
     from .train import load_model
 

@@ -28,7 +28,7 @@ import json
 from dataclasses import replace
 from html import escape
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -103,14 +103,14 @@ def _fmt(v: float, digits: int = 4) -> str:
     return "-" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
 
 
-def started_from(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig:
+def started_from(log_config: Dict[str, Any], cfg: TrainConfig) -> TrainConfig:
     """``cfg`` with the seed, U-Net width, initial disparity and network input a run's log
     records (what its network was before training); ``cfg``'s values where an older log
     lacks one (logs from before the input option: the all-in-focus image)."""
     init = log_config.get("init_disparity", cfg.init_disparity)
-    return replace(cfg, seed=int(log_config.get("seed", cfg.seed)),  # type: ignore[arg-type]
-                   base=int(log_config.get("base", cfg.base)),  # type: ignore[arg-type]
-                   init_disparity=None if init is None else float(init),  # type: ignore[arg-type]
+    return replace(cfg, seed=int(log_config.get("seed", cfg.seed)),
+                   base=int(log_config.get("base", cfg.base)),
+                   init_disparity=None if init is None else float(init),
                    inputs=str(log_config.get("inputs", "aif")))
 
 
@@ -118,11 +118,11 @@ def started_from(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig
 LOSS_FIELDS = ("w_l1", "w_smooth", "w_structure", "edge_sensitivity", "highlights", "w_focus", "focus_prior_radius_px")
 
 
-def trained_loss(log_config: Dict[str, object], cfg: TrainConfig) -> TrainConfig:
+def trained_loss(log_config: Dict[str, Any], cfg: TrainConfig) -> TrainConfig:
     """``cfg`` with the loss settings a run's log records (its weights, highlight mode and
     focus prior at the end of training), so that the loss is the one it was trained with
     whatever the eval's command line says."""
-    return replace(cfg, **{k: log_config[k] for k in LOSS_FIELDS if k in log_config})  # type: ignore[arg-type]
+    return replace(cfg, **{k: log_config[k] for k in LOSS_FIELDS if k in log_config})
 
 
 def evaluate(
@@ -133,12 +133,12 @@ def evaluate(
     html_scenes: int = 8,
     note: str = "",
     left_out: str = "",
-) -> Dict[str, object]:
+) -> Dict[str, Any]:
     """Writes ``results.md``, ``results.json``, ``index.html`` (+ ``html/*.png``) and
     ``plots/*.svg`` into ``out_dir``; returns the results. ``left_out`` says which scenes of
     the split the test set lacks (empty: none), in the table's header and the JSON."""
     test = splits["test"]
-    rows: List[Dict[str, object]] = []
+    rows: List[Dict[str, Any]] = []
     preds: Dict[str, np.ndarray] = {}
     starts: Dict[Tuple[int, int, Optional[float], str], TrainConfig] = {}
     for spec in runs:
@@ -150,7 +150,7 @@ def evaluate(
         starts[(start.seed, start.base, start.init_disparity, start.inputs)] = start
         p = predict(load_model(run_dir, spec.config(start)), start.input_of(test.aif, test.bokeh))
         preds[spec.name] = p
-        ranked: Dict[str, object] = {}
+        ranked: Dict[str, Any] = {}
         if spec.layer != "supervised":
             trained = trained_loss(log["config"], start)
             at_pred = scene_losses(spec, trained, test, p)
@@ -190,11 +190,11 @@ def evaluate(
         "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
-        ranked = (f"{_fmt(r['loss_at_prediction'], 3)} / {_fmt(r['loss_at_truth'], 3)} | "  # type: ignore[arg-type]
-                  f"{r['truth_lower_scenes']} of {len(test)}") if "loss_at_truth" in r else "- | -"
+        ranked_cells = (f"{_fmt(r['loss_at_prediction'], 3)} / {_fmt(r['loss_at_truth'], 3)} | "
+                        f"{r['truth_lower_scenes']} of {len(test)}") if "loss_at_truth" in r else "- | -"
         lines.append(
             f"| {r['run']} | {r['layer']} | {r['loss']} | {_fmt(r['mae'])} | {_fmt(r['rmse'])} | "
-            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r['mae_tex'])} | {_fmt(r['mae_bg'])} | {_fmt(r['mae_fg'])} | {ranked} | "
+            f"{_fmt(r['delta125'], 3)} | {_fmt(r['mae_k3'])} | {_fmt(r['mae_tex'])} | {_fmt(r['mae_bg'])} | {_fmt(r['mae_fg'])} | {ranked_cells} | "
             f"{_fmt(r.get('seconds_per_step', float('nan')), 2)} | {_fmt(r.get('seconds_per_epoch', float('nan')), 1)} |"
         )
     (out_dir / "results.md").write_text("\n".join(lines) + "\n")
@@ -227,7 +227,7 @@ def _plots(out_dir: Path, runs: Sequence[RunSpec]) -> None:
         (plots / "val_mae.svg").write_text(svg_lines(val, "validation disparity MAE (monitoring only)", "step", "MAE"))
 
 
-def _html(out_dir: Path, test: Split, preds: Dict[str, np.ndarray], rows: List[Dict[str, object]], count: int) -> None:
+def _html(out_dir: Path, test: Split, preds: Dict[str, np.ndarray], rows: List[Dict[str, Any]], count: int) -> None:
     pics = out_dir / "html"
     pics.mkdir(exist_ok=True)
     order = np.argsort(test.blur)
@@ -258,7 +258,7 @@ def _html(out_dir: Path, test: Split, preds: Dict[str, np.ndarray], rows: List[D
         body.append(f"<tr><td>{escape(name)}<br><small>K {test.blur[i]:.1f} px</small></td>{''.join(cells)}</tr>")
     table = (out_dir / "results.md").read_text()
     seen = {"aif": "the all-in-focus image (aif) only", "aif+bokeh": "the all-in-focus and the defocused image (aif and bokeh)"}
-    inputs = sorted({str(r["train_config"].get("inputs", "aif")) for r in rows if isinstance(r.get("train_config"), dict)})  # type: ignore[union-attr]
+    inputs = sorted({str(r["train_config"].get("inputs", "aif")) for r in rows if isinstance(r.get("train_config"), dict)})
     sees = "; ".join(seen.get(i, i) for i in inputs) or seen["aif"]
     page = (
         "<!doctype html><meta charset='utf-8'><title>drbokeh.dfdnet test images</title>"

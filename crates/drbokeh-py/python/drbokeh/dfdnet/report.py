@@ -6,7 +6,7 @@ import struct
 import zlib
 from html import escape
 from pathlib import Path
-from typing import Dict, List, Sequence, Tuple
+from typing import List, Mapping, Sequence, Tuple
 
 import numpy as np
 
@@ -42,7 +42,7 @@ PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#1
 
 
 def svg_lines(
-    series: Dict[str, Sequence[Tuple[float, float]]],
+    series: Mapping[str, Sequence[Tuple[float, float]]],
     title: str,
     xlabel: str,
     ylabel: str,

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -41,7 +41,7 @@ class SeedTableError(ValueError):
 FREE_SETTINGS = ("seed", "threads")
 
 
-def _read_json(path: Path, what: str) -> Dict[str, object]:
+def _read_json(path: Path, what: str) -> Dict[str, Any]:
     try:
         value = json.loads(path.read_text())
     except FileNotFoundError:
@@ -53,7 +53,7 @@ def _read_json(path: Path, what: str) -> Dict[str, object]:
     return value
 
 
-def _differs(a: Dict[str, object], b: Dict[str, object]) -> Optional[str]:
+def _differs(a: Dict[str, Any], b: Dict[str, Any]) -> Optional[str]:
     """The first setting (outside :data:`FREE_SETTINGS`) whose value differs, with both
     values. A setting that one log lacks (written before the setting existed) counts as
     its default, which is what that run was trained with."""
@@ -76,7 +76,7 @@ def _row_ok(row: object, scenes: int) -> bool:
             and len(per_scene) in (0, scenes))
 
 
-def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
+def load_results(dirs: Sequence[Path]) -> List[Dict[str, Any]]:
     """Each directory's ``results.json`` (and the training record ``config.json``, where
     ``train`` wrote one), checked to be of one protocol that differs only in the seed: the
     same test scenes, each run trained with the same settings (its log's, as ``eval``
@@ -107,30 +107,30 @@ def load_results(dirs: Sequence[Path]) -> List[Dict[str, object]]:
     seeds = [r["seed"] for r in out]
     if len(set(seeds)) != len(seeds):
         raise SeedTableError(f"table: the directories repeat a seed ({seeds}); each must be another --seed")
-    first_runs = {row["run"]: row for row in first["rows"] if "train_config" in row}  # type: ignore[union-attr]
+    first_runs = {row["run"]: row for row in first["rows"] if "train_config" in row}
     for r in out[1:]:
         where = f"table: {r['dir']} differs from {first['dir']} in"
         if first.get("test_scenes") != r.get("test_scenes"):
             raise SeedTableError(f"{where} its test scenes")
-        for row in r["rows"]:  # type: ignore[union-attr]
+        for row in r["rows"]:
             if row["run"] in first_runs and "train_config" in row:
                 diff = _differs(first_runs[row["run"]]["train_config"], row["train_config"])
                 if diff:
                     raise SeedTableError(f"{where} how {row['run']} was trained: {diff}")
         if first["training"] is not None and r["training"] is not None:
             for key in ("splits", "min_blur_px"):
-                if first["training"].get(key) != r["training"].get(key):  # type: ignore[union-attr]
+                if first["training"].get(key) != r["training"].get(key):
                     raise SeedTableError(f"{where} its data ({key} in config.json)")
     return out
 
 
-def combine(results: Sequence[Dict[str, object]]) -> Dict[str, object]:
+def combine(results: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
     """Per run (in the first directory's order; runs missing from a seed are left out):
     MAE per seed, mean, min/max, wins among the layer runs, and the means of
     :data:`MEAN_COLUMNS`."""
-    seeds = [int(r["seed"]) for r in results]  # type: ignore[call-overload]
-    by_seed = [{row["run"]: row for row in r["rows"]} for r in results]  # type: ignore[union-attr]
-    names = [row["run"] for row in results[0]["rows"] if all(row["run"] in s for s in by_seed)]  # type: ignore[union-attr]
+    seeds = [int(r["seed"]) for r in results]
+    by_seed = [{row["run"]: row for row in r["rows"]} for r in results]
+    names = [row["run"] for row in results[0]["rows"] if all(row["run"] in s for s in by_seed)]
     layer_runs = [n for n in names if by_seed[0][n]["layer"] not in REFERENCE_LAYERS]
     winners = [min(layer_runs, key=lambda n: s[n]["mae"]) if layer_runs else None for s in by_seed]
     rows = []
@@ -145,18 +145,18 @@ def combine(results: Sequence[Dict[str, object]]) -> Dict[str, object]:
         # In how many (scene, seed) pairs the run's loss ranks the truth below its prediction
         # (evals since session 31 record it).
         lower = [s[n].get("truth_lower_scenes") for s in by_seed]
-        row["truth_lower"] = int(sum(lower)) if all(isinstance(v, int) for v in lower) else None  # type: ignore[arg-type]
+        row["truth_lower"] = int(sum(lower)) if all(isinstance(v, int) for v in lower) else None
         rows.append(row)
-    partial = sorted({row["run"] for r in results for row in r["rows"]} - set(names))  # type: ignore[union-attr]
+    partial = sorted({row["run"] for r in results for row in r["rows"]} - set(names))
     layered = [r for r in rows if r["wins"] is not None]
     best = min(layered, key=lambda r: r["mae_mean"])["run"] if layered else None
     return {"seeds": seeds, "dirs": [r["dir"] for r in results], "rows": rows, "left_out": partial,
-            "test_scenes": len(results[0].get("test_scenes", [])),  # type: ignore[arg-type]
+            "test_scenes": len(results[0].get("test_scenes", [])),
             "best": best, "paired": paired(by_seed, layer_runs, best)}
 
 
-def paired(by_seed: Sequence[Dict[str, Dict[str, object]]], layer_runs: Sequence[str],
-           best: Optional[str]) -> List[Dict[str, object]]:
+def paired(by_seed: Sequence[Dict[str, Dict[str, Any]]], layer_runs: Sequence[str],
+           best: Optional[str]) -> List[Dict[str, Any]]:
     """Each layer run against ``best`` (the lowest mean MAE), scene by scene: per test scene
     the run's MAE minus ``best``'s, averaged over the seeds; the mean over the scenes with a
     95 % interval (mean +- 1.96 standard errors, the scenes taken as independent) and the
@@ -179,17 +179,17 @@ def paired(by_seed: Sequence[Dict[str, Dict[str, object]]], layer_runs: Sequence
 
 
 def _f(v: object, digits: int = 4) -> str:
-    return "-" if v is None else f"{v:.{digits}f}"  # type: ignore[str-format]
+    return "-" if v is None else f"{v:.{digits}f}"
 
 
-def markdown(table: Dict[str, object]) -> str:
-    seeds: List[int] = table["seeds"]  # type: ignore[assignment]
-    rows: List[Dict[str, object]] = table["rows"]  # type: ignore[assignment]
+def markdown(table: Dict[str, Any]) -> str:
+    seeds: List[int] = table["seeds"]
+    rows: List[Dict[str, Any]] = table["rows"]
     best = table["best"]
     head = ["run", "layer", "loss"] + [f"MAE seed {s}" for s in seeds] + ["MAE mean", "min-max", "lowest (of layers)"]
     head += [name + " (mean)" for _, name in MEAN_COLUMNS] + ["truth lower (all seeds)"]
     lines = ["# drbokeh.dfdnet: test table over seeds", "",
-             f"Seeds {', '.join(map(str, seeds))} ({', '.join(table['dirs'])}); {table['test_scenes']} test scenes; "  # type: ignore[arg-type]
+             f"Seeds {', '.join(map(str, seeds))} ({', '.join(table['dirs'])}); {table['test_scenes']} test scenes; "
              "every setting but the seed is the same in each directory. \"lowest\": at how many seeds the run had the "
              "lowest MAE among the runs trained through a rendering layer (the supervised and reference rows are not "
              "counted). The mean with the lowest value among the layer runs is in bold. \"loss pred\" / \"loss truth\": "
@@ -197,19 +197,19 @@ def markdown(table: Dict[str, object]) -> str:
              "\"truth lower\": in how many (scene, seed) pairs that loss ranks the truth below the prediction.", "",
              "| " + " | ".join(head) + " |",
              "| --- | --- | --- | " + " | ".join("---:" for _ in head[3:]) + " |"]
-    left_out: List[str] = table.get("left_out", [])  # type: ignore[assignment]
+    left_out: List[str] = table.get("left_out", [])
     if left_out:
         lines[4:4] = [f"Left out (not evaluated in every directory): {', '.join(left_out)}.", ""]
     for r in rows:
         mean = _f(r["mae_mean"])
-        cells = [str(r["run"]), str(r["layer"]), str(r["loss"])] + [_f(v) for v in r["mae"]]  # type: ignore[union-attr]
+        cells = [str(r["run"]), str(r["layer"]), str(r["loss"])] + [_f(v) for v in r["mae"]]
         cells += [f"**{mean}**" if r["run"] == best else mean, f"{_f(r['mae_min'])}-{_f(r['mae_max'])}",
                   "-" if r["wins"] is None else f"{r['wins']} of {len(seeds)}"]
         cells += [_f(r[key], 3 if key in THREE_DIGITS else (1 if key == "seconds_per_epoch" else 4)) for key, _ in MEAN_COLUMNS]
         cells.append("-" if r.get("truth_lower") is None
-                     else f"{r['truth_lower']} of {table['test_scenes'] * len(seeds)}")  # type: ignore[operator]
+                     else f"{r['truth_lower']} of {table['test_scenes'] * len(seeds)}")
         lines.append("| " + " | ".join(cells) + " |")
-    pairs: List[Dict[str, object]] = table.get("paired", [])  # type: ignore[assignment]
+    pairs: List[Dict[str, Any]] = table.get("paired", [])
     if pairs:
         lines += ["", f"Scene by scene against the lowest mean ({best}): each scene's MAE minus {best}'s, averaged "
                   f"over the seeds, then the mean over the {pairs[0]['scenes']} test scenes with a 95 % interval "
@@ -223,7 +223,7 @@ def markdown(table: Dict[str, object]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_table(dirs: Sequence[Path], out_dir: Path) -> Dict[str, object]:
+def write_table(dirs: Sequence[Path], out_dir: Path) -> Dict[str, Any]:
     """Writes ``out_dir/results.md`` and ``results.json`` (see the module docs); returns the table."""
     table = combine(load_results(dirs))
     out_dir.mkdir(parents=True, exist_ok=True)

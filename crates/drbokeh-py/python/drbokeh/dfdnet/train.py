@@ -10,7 +10,7 @@ import math
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -185,8 +185,10 @@ def new_model(cfg: TrainConfig) -> UNet:
     model = UNet(cfg.base, cfg.in_channels)
     if cfg.init_disparity is not None:
         p = min(max(cfg.init_disparity, 1e-3), 1 - 1e-3)
+        bias = model.head.bias
+        assert bias is not None  # the head is a Conv2d with a bias (unet.py)
         with torch.no_grad():
-            model.head.bias.fill_(math.log(p / (1 - p)))
+            bias.fill_(math.log(p / (1 - p)))
     return model
 
 
@@ -278,7 +280,7 @@ def train_run(
     cfg: TrainConfig,
     out_dir: Path,
     log: Callable[[str], None] = print,
-) -> Dict[str, object]:
+) -> Dict[str, Any]:
     """Trains one run; writes ``out_dir/<name>/model.pt`` and ``log.json`` (loss curve,
     validation MAE curve, seconds per step and per epoch). The validation MAE is logged for
     the plots only; the last weights are the result (no selection on labels)."""
@@ -325,7 +327,7 @@ def train_run(
             log(f"{spec.name}: step {step + 1}/{cfg.steps} loss {float(loss.detach()):.4f} val MAE {mae:.4f} "
                 f"({recent:.2f} s/step{time_left(recent, cfg.steps - step - 1)})")
     steps_per_epoch = n / cfg.batch
-    result: Dict[str, object] = {
+    result: Dict[str, Any] = {
         "run": spec.name,
         "layer": spec.layer,
         "loss": spec.loss if spec.layer != "supervised" else "disparity L1",
@@ -390,6 +392,6 @@ def load_model(run_dir: Path, cfg: TrainConfig) -> UNet:
     return model
 
 
-def existing(out_dir: Path, spec: RunSpec) -> Optional[Dict[str, object]]:
+def existing(out_dir: Path, spec: RunSpec) -> Optional[Dict[str, Any]]:
     p = out_dir / spec.name / "log.json"
     return json.loads(p.read_text()) if p.exists() and (out_dir / spec.name / "model.pt").exists() else None
