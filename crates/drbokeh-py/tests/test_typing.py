@@ -18,3 +18,15 @@ def test_the_package_type_checks(tmp_path):
     )
     assert p.returncode == 0, p.stdout + p.stderr
     assert "Success" in p.stdout
+
+
+def test_the_stub_matches_the_compiled_module(tmp_path):
+    """``_native.pyi`` against the installed ``drbokeh._native`` (mypy's stubtest): every
+    function and class of the module is in the stub with the runtime's parameters (names,
+    kinds, defaults), and the stub names nothing the module lacks."""
+    pytest.importorskip("mypy", reason="mypy is not installed (scripts/test installs it)")
+    p = subprocess.run(
+        [sys.executable, "-m", "mypy.stubtest", "drbokeh._native"],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    )
+    assert p.returncode == 0, p.stdout + p.stderr

@@ -2,31 +2,38 @@
 
 import os
 import pathlib
-from typing import Any, Dict, List, Literal, Optional, Tuple, Union, overload
+from typing import Any, Dict, List, Literal, Optional, Tuple, Union, final, overload
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
 
-PathLike = Union[str, "os.PathLike[str]"]
+__all__ = [
+    "__version__", "DrBokehWarning", "Tape", "render", "render_with_tape", "vjp", "time_library_render",
+    "aperture_layer", "render_image", "decompose", "load_stack", "save_stack", "read_image", "read_disparity",
+    "read_matte", "benchmark_scenes", "load_benchmark_scene", "trace", "demo",
+]
+
+_PathLike = Union[str, "os.PathLike[str]"]
 #: float32 or float64 arrays (anything else raises ValueError; lists go through np.asarray).
-FloatArray = npt.ArrayLike
+_FloatArray = npt.ArrayLike
 #: A shape name (``"circle"``, ``"hexagon"``, ``"polygon:N[:DEG]"``, ``"triangle"`` ...
 #: ``"octagon"``), ``"kernel:PATH"`` (a grey image file) or a grey ``(h, w)`` kernel array.
-ApertureArg = Union[str, npt.ArrayLike, None]
-DTypeArg = Union[str, type, np.dtype, None]
-Precision = Literal["float32", "float64"]
+_ApertureArg = Union[str, npt.ArrayLike, None]
+_DTypeArg = Union[str, type, np.dtype, None]
+_Precision = Literal["float32", "float64"]
 
 class DrBokehWarning(UserWarning):
     """Notes about a render: the automatic window clips the blur, the decomposition fell
     back to one layer."""
 
+@final
 class Tape:
     """What :func:`render_with_tape` recorded for the backward pass of one render."""
 
     @property
-    def dtype(self) -> Precision:
+    def dtype(self) -> _Precision:
         """The precision of the render and of the gradients."""
     @property
     def engine(self) -> Literal["threaded", "fast", "spans"]:
@@ -37,7 +44,7 @@ class Tape:
         """``(N, H, W)`` of the stack the tape was recorded for."""
     def backward(
         self,
-        grad_output: FloatArray,
+        grad_output: _FloatArray,
         *,
         rescale_small_gradients: bool = False,
         threads: Optional[int] = None,
@@ -49,14 +56,14 @@ class Tape:
         magnitude in [1e-6, 1e-2) raised to 1e-2); no longer the exact gradient."""
 
 def render(
-    rgb: FloatArray,
-    alpha: FloatArray,
-    disparity: FloatArray,
+    rgb: _FloatArray,
+    alpha: _FloatArray,
+    disparity: _FloatArray,
     *,
     focus: float,
     blur: float,
     preset: Literal["physical", "paper"] = "physical",
-    aperture: ApertureArg = "circle",
+    aperture: _ApertureArg = "circle",
     window: Optional[int] = None,
     gamma: float = 2.2,
     offset: float = 0.0,
@@ -74,7 +81,7 @@ def render(
         blur: blur strength K: blur radius in pixels per unit of relative disparity.
         preset: ``"physical"`` (measured closer to a real lens) or ``"paper"`` (the
             published Dr.Bokeh model, exactly).
-        aperture: the bokeh shape (see ``ApertureArg``).
+        aperture: the bokeh shape (see ``_ApertureArg``).
         window: odd gather window L = 2R + 1; ``None``: just holds the largest blur
             (at most 71 except for the fast engine; a clipped blur issues a
             :class:`DrBokehWarning`).
@@ -96,14 +103,14 @@ def render(
     """
 
 def render_with_tape(
-    rgb: FloatArray,
-    alpha: FloatArray,
-    disparity: FloatArray,
+    rgb: _FloatArray,
+    alpha: _FloatArray,
+    disparity: _FloatArray,
     *,
     focus: float,
     blur: float,
     preset: Literal["physical", "paper"] = "physical",
-    aperture: ApertureArg = "circle",
+    aperture: _ApertureArg = "circle",
     window: Optional[int] = None,
     gamma: float = 2.2,
     offset: float = 0.0,
@@ -117,15 +124,15 @@ def render_with_tape(
     one in float64; ``"fast"``: the fast engine's (within 1e-5)."""
 
 def vjp(
-    rgb: FloatArray,
-    alpha: FloatArray,
-    disparity: FloatArray,
-    grad_output: FloatArray,
+    rgb: _FloatArray,
+    alpha: _FloatArray,
+    disparity: _FloatArray,
+    grad_output: _FloatArray,
     *,
     focus: float,
     blur: float,
     preset: Literal["physical", "paper"] = "physical",
-    aperture: ApertureArg = "circle",
+    aperture: _ApertureArg = "circle",
     window: Optional[int] = None,
     gamma: float = 2.2,
     offset: float = 0.0,
@@ -140,18 +147,18 @@ def vjp(
     ``(H, W, 3)``; float64 if any array (``grad_output`` included) is float64."""
 
 def render_image(
-    image: FloatArray,
-    disparity: FloatArray,
+    image: _FloatArray,
+    disparity: _FloatArray,
     *,
     focus: Optional[float] = None,
     focus_at: Optional[Tuple[int, int]] = None,
     blur: float = 30.0,
-    alpha: Optional[FloatArray] = None,
+    alpha: Optional[_FloatArray] = None,
     single_layer: bool = False,
     max_layers: Optional[int] = None,
     linear: bool = False,
     preset: Literal["physical", "paper"] = "physical",
-    aperture: ApertureArg = "circle",
+    aperture: _ApertureArg = "circle",
     window: Optional[int] = None,
     gamma: float = 2.2,
     offset: float = 0.0,
@@ -174,8 +181,8 @@ def render_image(
 
 @overload
 def aperture_layer(
-    image: FloatArray,
-    disparity: FloatArray,
+    image: _FloatArray,
+    disparity: _FloatArray,
     *,
     focus: float,
     blur: float,
@@ -185,13 +192,13 @@ def aperture_layer(
 ) -> np.ndarray: ...
 @overload
 def aperture_layer(
-    image: FloatArray,
-    disparity: FloatArray,
+    image: _FloatArray,
+    disparity: _FloatArray,
     *,
     focus: float,
     blur: float,
     gamma: float = 2.2,
-    grad_output: FloatArray,
+    grad_output: _FloatArray,
     threads: Optional[int] = None,
 ) -> Tuple[np.ndarray, np.ndarray]:
     """Aperture compositing (Srinivasan et al. 2018) as a rendering layer: ``image``
@@ -203,10 +210,10 @@ def aperture_layer(
     respect to ``disparity``. float64 if any array is, float32 otherwise."""
 
 def decompose(
-    image: FloatArray,
-    disparity: FloatArray,
+    image: _FloatArray,
+    disparity: _FloatArray,
     *,
-    alpha: Optional[FloatArray] = None,
+    alpha: Optional[_FloatArray] = None,
     max_layers: int = 5,
     jump: float = 0.05,
     band: Optional[float] = None,
@@ -218,36 +225,36 @@ def decompose(
     (N,H,W,3)``, ``alpha (N,H,W)``, ``disparity (N,H,W)``, ``thresholds`` (the cut
     disparities, nearest first: ``List[float]``) and ``notes`` (``List[str]``)."""
 
-def load_stack(path: PathLike, *, dtype: DTypeArg = None) -> Dict[str, np.ndarray]:
+def load_stack(path: _PathLike, *, dtype: _DTypeArg = None) -> Dict[str, np.ndarray]:
     """Reads and validates a layer stack NPZ: ``rgb``, ``alpha``, ``disparity`` of
     ``dtype`` (float32 by default). Raises OSError naming the file and the problem."""
 
-def save_stack(path: PathLike, rgb: FloatArray, alpha: FloatArray, disparity: FloatArray) -> None:
+def save_stack(path: _PathLike, rgb: _FloatArray, alpha: _FloatArray, disparity: _FloatArray) -> None:
     """Validates and writes a layer stack NPZ (float32 arrays), atomically."""
 
-def read_image(path: PathLike, *, dtype: DTypeArg = None) -> Tuple[np.ndarray, Literal["encoded", "linear"]]:
+def read_image(path: _PathLike, *, dtype: _DTypeArg = None) -> Tuple[np.ndarray, Literal["encoded", "linear"]]:
     """Reads a colour image as ``(H, W, 3)`` values as stored, and says which:
     ``"encoded"`` (PNG, JPEG, TIFF: display-encoded, scaled to [0, 1]) or ``"linear"``
     (EXR: linear light)."""
 
 def read_disparity(
-    path: PathLike, *, depth: bool = False, normalize: bool = True, dtype: DTypeArg = None
+    path: _PathLike, *, depth: bool = False, normalize: bool = True, dtype: _DTypeArg = None
 ) -> np.ndarray:
     """Reads a disparity map ``(H, W)`` (16-bit PNG, EXR, NPY, NPZ key ``data``),
     min-max normalised unless ``normalize=False``; ``depth=True``: metric depth converted
     to disparity 1/z first."""
 
-def read_matte(path: PathLike, *, dtype: DTypeArg = None) -> np.ndarray:
+def read_matte(path: _PathLike, *, dtype: _DTypeArg = None) -> np.ndarray:
     """Reads an alpha matte ``(H, W)`` in [0, 1]: a grey image or an image's alpha channel."""
 
-def benchmark_scenes(benchmark: PathLike) -> List[pathlib.Path]:
+def benchmark_scenes(benchmark: _PathLike) -> List[pathlib.Path]:
     """The scene directories of a benchmark, sorted (see ``drbokeh.load_benchmark``)."""
 
-def load_benchmark_scene(dir: PathLike) -> Dict[str, Any]:
+def load_benchmark_scene(dir: _PathLike) -> Dict[str, Any]:
     """One benchmark scene as a dict (see ``drbokeh.load_benchmark``)."""
 
 def trace(
-    scene: PathLike,
+    scene: _PathLike,
     *,
     spp: Optional[int] = None,
     seed: Optional[int] = None,
@@ -258,14 +265,14 @@ def trace(
     ``depth_mm``, ``disparity`` ``(H, W)``, ``layers`` (a stack dict) and ``camera``
     (``focus``, ``blur``). float32."""
 
-def demo(width: int = 640, height: int = 426, *, dtype: DTypeArg = None) -> Dict[str, Any]:
+def demo(width: int = 640, height: int = 426, *, dtype: _DTypeArg = None) -> Dict[str, Any]:
     """The built-in demo scene: ``rgb``, ``alpha``, ``disparity`` (three layers) and
     ``focus`` (the disparity of its subject)."""
 
 def time_library_render(
-    rgb: FloatArray,
-    alpha: FloatArray,
-    disparity: FloatArray,
+    rgb: _FloatArray,
+    alpha: _FloatArray,
+    disparity: _FloatArray,
     *,
     focus: float,
     blur: float,
