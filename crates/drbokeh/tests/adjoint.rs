@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{settings, Rng};
+use common::{random_weights, settings, Rng};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::{Coverage, CoverageRadius, Footprint, ModelOptions, ScatterStep, Transfer};
 use drbokeh::HighlightBoost;
@@ -36,12 +36,6 @@ fn fd_stack(seed: u64, w: usize, h: usize, n: usize) -> LayerStack<f64> {
 fn loss(stack: &LayerStack<f64>, s: &RenderSettings, weights: &Image<f64>) -> f64 {
     let out = render(stack, s, Engine::Threaded, &NoProgress).unwrap();
     out.data.iter().zip(&weights.data).map(|(a, b)| a * b).sum()
-}
-
-fn random_weights(seed: u64, w: usize, h: usize) -> Image<f64> {
-    let mut rng = Rng(seed);
-    let data = (0..w * h * 3).map(|_| rng.range(-1.0, 1.0)).collect();
-    Image::from_vec(w, h, 3, data).unwrap()
 }
 
 const STEP: f64 = 1e-6;

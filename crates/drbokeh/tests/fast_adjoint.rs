@@ -9,13 +9,16 @@
 
 mod common;
 
-use common::{random_stack, settings, tape_bits, tape_gradients, Rng};
+use common::{
+    gradient_kinds, max_abs, max_diff, random_stack, random_weights, settings, tape_bits,
+    tape_gradients,
+};
 use drbokeh::aperture::KernelImage;
 use drbokeh::presets::ModelOptions;
 use drbokeh::HighlightBoost;
 use drbokeh::{
-    render, render_with_tape, render_with_tape_on, Aperture, Engine, Gradients, Image, Layer,
-    LayerStack, NoProgress, Real, RenderSettings,
+    render, render_with_tape, render_with_tape_on, Aperture, Engine, Image, Layer, LayerStack,
+    NoProgress, Real, RenderSettings,
 };
 
 /// Largest allowed `|fast - exact|`, relative to the largest exact gradient of the same
@@ -45,43 +48,16 @@ const TAIL_TOLERANCE: f64 = 1e-5;
 /// upstream factors and kernel sums, which do not vanish with it.
 const SCALE_FLOOR: f64 = 1e-2;
 
-fn weights(seed: u64, w: usize, h: usize) -> Image<f64> {
-    let mut rng = Rng(seed);
-    let data = (0..w * h * 3).map(|_| rng.range(-1.0, 1.0)).collect();
-    Image::from_vec(w, h, 3, data).unwrap()
-}
-
-/// Every gradient of `grads` as `(name, values)`, scalars last.
-fn kinds(g: &Gradients<f64>) -> Vec<(String, Vec<f64>)> {
-    let mut out = Vec::new();
-    for (l, lg) in g.layers.iter().enumerate() {
-        out.push((format!("layer {l} rgb"), lg.rgb.data.clone()));
-        out.push((format!("layer {l} alpha"), lg.alpha.data.clone()));
-        out.push((format!("layer {l} disparity"), lg.disparity.data.clone()));
-    }
-    out.push(("K".into(), vec![g.blur_k]));
-    out.push(("focus".into(), vec![g.focus]));
-    out
-}
-
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |m, x| m.max(x.abs()))
-}
-
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
-}
-
 /// Fast vs exact in f64 (within [`TAIL_TOLERANCE`]) and in f32: the fast f32 gradient must
 /// lie within the tail tolerance plus twice the f32 rounding error that the exact adjoint
 /// itself shows in f32 (both measured against the exact f64 adjoint).
 fn check(name: &str, stack: &LayerStack<f64>, s: &RenderSettings, seed: u64) {
-    let g = weights(seed, stack.width, stack.height);
-    let exact = kinds(&tape_gradients(stack, s, &g, Engine::Threaded));
-    let fast = kinds(&tape_gradients(stack, s, &g, Engine::Fast));
+    let g = random_weights(seed, stack.width, stack.height);
+    let exact = gradient_kinds(&tape_gradients(stack, s, &g, Engine::Threaded));
+    let fast = gradient_kinds(&tape_gradients(stack, s, &g, Engine::Fast));
     let (stack32, g32) = (stack.cast::<f32>(), g.cast::<f32>());
-    let exact32 = kinds(&tape_gradients(&stack32, s, &g32, Engine::Threaded));
-    let fast32 = kinds(&tape_gradients(&stack32, s, &g32, Engine::Fast));
+    let exact32 = gradient_kinds(&tape_gradients(&stack32, s, &g32, Engine::Threaded));
+    let fast32 = gradient_kinds(&tape_gradients(&stack32, s, &g32, Engine::Fast));
     let mut failures = Vec::new();
     for i in 0..exact.len() {
         let (kind, reference) = (&exact[i].0, &exact[i].1);
@@ -205,7 +181,7 @@ fn fast_adjoint_matches_exact_with_empty_regions() {
 #[test]
 fn fast_adjoint_is_identical_for_any_thread_count() {
     let stack = random_stack::<f32>(9, 37, 29, 3);
-    let g = weights(7, 37, 29).cast::<f32>();
+    let g = random_weights(7, 37, 29).cast::<f32>();
     let paper = settings(
         0.4,
         11.0,

@@ -8,11 +8,14 @@
 
 mod common;
 
-use common::{mixed_stack, random_stack, settings, tape_bits, tape_gradients};
+use common::{
+    gradient_kinds, max_abs, max_diff, mixed_stack, random_stack, random_weights, settings,
+    tape_bits, tape_gradients,
+};
 use drbokeh::presets::ModelOptions;
 use drbokeh::{
-    render, render_with_stats, render_with_tape_on, Aperture, Engine, Gradients, Image, Layer,
-    LayerStack, NoProgress, RenderSettings,
+    render, render_with_stats, render_with_tape_on, Aperture, Engine, Image, Layer, LayerStack,
+    NoProgress, RenderSettings,
 };
 
 /// Largest allowed `|spans - exact|`, relative to the largest exact gradient of the same
@@ -36,32 +39,6 @@ const BOUND: f64 = 3e-4;
 /// layer's largest gradient of any kind (as in `tests/fast_adjoint.rs`).
 const SCALE_FLOOR: f64 = 1e-2;
 
-fn weights(seed: u64, w: usize, h: usize) -> Image<f64> {
-    let mut rng = common::Rng(seed);
-    let data = (0..w * h * 3).map(|_| rng.range(-1.0, 1.0)).collect();
-    Image::from_vec(w, h, 3, data).unwrap()
-}
-
-fn kinds(g: &Gradients<f64>) -> Vec<(String, Vec<f64>)> {
-    let mut out = Vec::new();
-    for (l, lg) in g.layers.iter().enumerate() {
-        out.push((format!("layer {l} rgb"), lg.rgb.data.clone()));
-        out.push((format!("layer {l} alpha"), lg.alpha.data.clone()));
-        out.push((format!("layer {l} disparity"), lg.disparity.data.clone()));
-    }
-    out.push(("K".into(), vec![g.blur_k]));
-    out.push(("focus".into(), vec![g.focus]));
-    out
-}
-
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |m, x| m.max(x.abs()))
-}
-
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
-}
-
 /// Spans (or auto) vs exact, f64 and f32. Returns the worst relative error in f64.
 fn check(
     name: &str,
@@ -70,12 +47,12 @@ fn check(
     seed: u64,
     engine: Engine,
 ) -> f64 {
-    let g = weights(seed, stack.width, stack.height);
-    let exact = kinds(&tape_gradients(stack, s, &g, Engine::Threaded));
-    let spans = kinds(&tape_gradients(stack, s, &g, engine));
+    let g = random_weights(seed, stack.width, stack.height);
+    let exact = gradient_kinds(&tape_gradients(stack, s, &g, Engine::Threaded));
+    let spans = gradient_kinds(&tape_gradients(stack, s, &g, engine));
     let (stack32, g32) = (stack.cast::<f32>(), g.cast::<f32>());
-    let exact32 = kinds(&tape_gradients(&stack32, s, &g32, Engine::Threaded));
-    let spans32 = kinds(&tape_gradients(&stack32, s, &g32, engine));
+    let exact32 = gradient_kinds(&tape_gradients(&stack32, s, &g32, Engine::Threaded));
+    let spans32 = gradient_kinds(&tape_gradients(&stack32, s, &g32, engine));
     let mut failures = Vec::new();
     let mut worst = 0.0f64;
     for i in 0..exact.len() {

@@ -149,3 +149,35 @@ pub fn mixed_stack<T: Real>(w: usize, h: usize) -> LayerStack<T> {
     }
     LayerStack::new(vec![front, back]).unwrap().cast()
 }
+
+/// Output weights for a vector-Jacobian product: a `w x h` RGB image, uniform in [-1, 1),
+/// from `seed`.
+pub fn random_weights(seed: u64, w: usize, h: usize) -> Image<f64> {
+    let mut rng = Rng(seed);
+    let data = (0..w * h * 3).map(|_| rng.range(-1.0, 1.0)).collect();
+    Image::from_vec(w, h, 3, data).unwrap()
+}
+
+/// Every gradient of `g` as `(name, values)`: per layer rgb, alpha and disparity, then K
+/// and focus.
+pub fn gradient_kinds(g: &Gradients<f64>) -> Vec<(String, Vec<f64>)> {
+    let mut out = Vec::new();
+    for (l, lg) in g.layers.iter().enumerate() {
+        out.push((format!("layer {l} rgb"), lg.rgb.data.clone()));
+        out.push((format!("layer {l} alpha"), lg.alpha.data.clone()));
+        out.push((format!("layer {l} disparity"), lg.disparity.data.clone()));
+    }
+    out.push(("K".into(), vec![g.blur_k]));
+    out.push(("focus".into(), vec![g.focus]));
+    out
+}
+
+/// The largest magnitude in `v` (0 for none).
+pub fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0, |m, x| m.max(x.abs()))
+}
+
+/// The largest difference between `a` and `b`, element by element.
+pub fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
+}
