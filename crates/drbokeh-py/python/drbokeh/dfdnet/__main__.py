@@ -22,7 +22,7 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -73,37 +73,30 @@ def _init_arg(text: str) -> object:
     return v
 
 
-def _count_arg(text: str) -> int:
-    """A count (steps, images, scenes, pixels, threads, jobs, channels): an integer >= 1."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 1") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 1")
-    return v
+def _number_arg(parse: Callable[[str], Any], ok: Callable[[Any], bool], expected: str) -> Callable[[str], Any]:
+    """An argparse ``type``: ``parse(text)`` where it parses and ``ok`` holds, else one line
+    saying what was ``expected``."""
+
+    def arg(text: str) -> Any:
+        try:
+            v = parse(text)
+        except ValueError:
+            v = None
+        if v is None or not ok(v):
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}")
+        return v
+
+    return arg
 
 
-def _rate_arg(text: str) -> float:
-    """``--lr``: a finite number > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a learning rate > 0, e.g. 0.004") from None
-    if not math.isfinite(v) or v <= 0.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a learning rate > 0, e.g. 0.004")
-    return v
-
-
-def _weight_arg(text: str) -> float:
-    """A loss weight: a finite number >= 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a weight >= 0") from None
-    if not math.isfinite(v) or v < 0.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a weight >= 0")
-    return v
+# A count (steps, images, scenes, pixels, threads, jobs): a whole number >= 1.
+_count_arg = _number_arg(int, lambda v: v >= 1, "a whole number >= 1")
+# --lr: a finite number > 0.
+_rate_arg = _number_arg(float, lambda v: math.isfinite(v) and v > 0.0, "a learning rate > 0, e.g. 0.004")
+# A loss weight: a finite number >= 0.
+_weight_arg = _number_arg(float, lambda v: math.isfinite(v) and v >= 0.0, "a weight >= 0")
+# --focus-prior-radius PX: a blur radius in pixels > 0.
+_radius_arg = _number_arg(float, lambda v: math.isfinite(v) and v > 0.0, "a blur radius in pixels > 0, e.g. 1")
 
 
 def _min_blur_arg(text: str) -> float:
@@ -115,17 +108,6 @@ def _min_blur_arg(text: str) -> float:
         return check_min_blur(v)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
-
-
-def _radius_arg(text: str) -> float:
-    """``--focus-prior-radius PX``: a blur radius in pixels > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels > 0, e.g. 1") from None
-    if not math.isfinite(v) or v <= 0.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a blur radius in pixels > 0, e.g. 1")
-    return v
 
 
 def _warmup_arg(text: str) -> Tuple[float, int]:
