@@ -81,7 +81,9 @@ def render(
         blur: blur strength K: blur radius in pixels per unit of relative disparity.
         preset: ``"physical"`` (measured closer to a real lens) or ``"paper"`` (the
             published Dr.Bokeh model, exactly).
-        aperture: the bokeh shape (see ``_ApertureArg``).
+        aperture: the bokeh shape: a shape name (``"circle"``, ``"hexagon"``,
+            ``"polygon:N[:DEG]"`` ...), ``"kernel:PATH"`` (a grey image file) or a grey
+            ``(h, w)`` kernel array.
         window: odd gather window L = 2R + 1; ``None``: just holds the largest blur
             (at most 71 except for the fast engine; a clipped blur issues a
             :class:`DrBokehWarning`).
