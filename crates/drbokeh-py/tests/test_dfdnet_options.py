@@ -154,7 +154,8 @@ def test_data_cache_is_shared_safely_and_a_damaged_one_is_a_one_line_error(tmp_p
         with pytest.raises(ValueError, match="train.npz: not a cached split"):
             prepare(cache, [spec], cli="/nonexistent/drbokeh")
     (tmp_path / "o" / "physical-hssim").mkdir(parents=True)
-    (tmp_path / "o" / "physical-hssim" / "model.pt").touch()  # a run for eval (never read: the data fails first)
+    for name in ("model.pt", "log.json"):  # a run for eval (never read: the data fails first)
+        (tmp_path / "o" / "physical-hssim" / name).write_text("{}")
     for bad in ("", "{", "7", '["x"]'):
         record.write_text(bad)
         with pytest.raises(ValueError, match="splits.json: not a record of splits"):

@@ -322,7 +322,7 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig, exclusio
     """The eval, on the test split without ``exclusion``'s scenes (:func:`_exclusion`). It
     reads (and, if missing, traces) the test split alone. Runs not trained in --out are left
     out and named; none trained is an error, before any tracing."""
-    missing = [spec.name for spec in runs if not (a.out / spec.name / "model.pt").is_file()]
+    missing = [spec.name for spec in runs if existing(a.out, spec) is None]
     if len(missing) == len(runs):
         raise SystemExit(f"eval: no run of {', '.join(missing)} is trained in {a.out} (train writes "
                          f"{a.out}/RUN/model.pt: give eval the --out that train had)")

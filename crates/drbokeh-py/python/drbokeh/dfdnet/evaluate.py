@@ -34,7 +34,7 @@ import numpy as np
 
 from .data import Split
 from .report import smooth, svg_lines, upscale, write_png
-from .train import RunSpec, TrainConfig, load_model, new_model, predict, scene_losses
+from .train import RunSpec, TrainConfig, existing, load_model, new_model, predict, scene_losses
 
 
 def depth_mm(disparity: np.ndarray, near_mm: np.ndarray, far_mm: np.ndarray) -> np.ndarray:
@@ -141,11 +141,13 @@ def evaluate(
     rows: List[Dict[str, Any]] = []
     preds: Dict[str, np.ndarray] = {}
     starts: Dict[Tuple[int, int, Optional[float], str], TrainConfig] = {}
+    logs: Dict[str, Dict[str, Any]] = {}  # the trained runs' logs, for the plots too
     for spec in runs:
         run_dir = out_dir / spec.name
-        if not (run_dir / "model.pt").exists():
+        log = existing(out_dir, spec)
+        if log is None:  # not trained here
             continue
-        log = json.loads((run_dir / "log.json").read_text())
+        logs[spec.name] = log
         start = started_from(log["config"], cfg)
         starts[(start.seed, start.base, start.init_disparity, start.inputs)] = start
         p = predict(load_model(run_dir, spec.config(start)), start.input_of(test.aif, test.bokeh))
@@ -200,26 +202,27 @@ def evaluate(
     (out_dir / "results.md").write_text("\n".join(lines) + "\n")
     results = {"rows": rows, "config": cfg.__dict__, "test_scenes": test.names, "note": note, "left_out": left_out}
     (out_dir / "results.json").write_text(json.dumps(results, indent=1))
-    _plots(out_dir, [s for s in runs if s.name in preds])
+    _plots(out_dir, logs)
     _html(out_dir, test, preds, rows, html_scenes)
     return results
 
 
-def _plots(out_dir: Path, runs: Sequence[RunSpec]) -> None:
+def _plots(out_dir: Path, logs: Dict[str, Dict[str, Any]]) -> None:
+    """The loss curves and validation MAE of the runs whose ``log.json`` is in ``logs``
+    (by run name, in the table's order)."""
     plots = out_dir / "plots"
     plots.mkdir(exist_ok=True)
     val: Dict[str, List] = {}
     rel: Dict[str, List] = {}
-    for spec in runs:
-        log = json.loads((out_dir / spec.name / "log.json").read_text())
+    for name, log in logs.items():
         losses = [c["loss"] for c in log["curve"]]
         sm = smooth(losses, 25)
         steps = [c["step"] + 1 for c in log["curve"]]
-        (plots / f"loss_{spec.name}.svg").write_text(
-            svg_lines({spec.name: list(zip(steps, sm))}, f"training loss, {spec.name} (running mean of 25)", "step", "loss", log_y=True)
+        (plots / f"loss_{name}.svg").write_text(
+            svg_lines({name: list(zip(steps, sm))}, f"training loss, {name} (running mean of 25)", "step", "loss", log_y=True)
         )
-        rel[spec.name] = [(s, v / sm[0]) for s, v in zip(steps, sm)]
-        val[spec.name] = [(c["step"], c["val_mae"]) for c in log["val_curve"]]
+        rel[name] = [(s, v / sm[0]) for s, v in zip(steps, sm)]
+        val[name] = [(c["step"], c["val_mae"]) for c in log["val_curve"]]
     if rel:
         (plots / "loss_relative.svg").write_text(
             svg_lines(rel, "training loss / its start (running mean of 25)", "step", "relative loss", log_y=True)
