@@ -214,18 +214,21 @@ def test_a_number_out_of_range_is_refused_in_one_line(option, bad, capsys):
 
 
 def test_eval_without_a_trained_run_says_so_before_tracing(tmp_path):
-    """``eval --out DIR`` where DIR holds none of the runs asked for: one line naming DIR,
-    exit status not 0, nothing traced (the CLI given does not exist) and nothing written."""
+    """``eval --out DIR`` where DIR holds none of the runs asked for (a run's weights without
+    its log.json do not count): one line naming DIR, exit status not 0, nothing traced (the
+    CLI given does not exist) and nothing written."""
     from drbokeh.dfdnet.__main__ import main
 
     out, data = tmp_path / "nothing", tmp_path / "data"
+    (out / "physical-hssim").mkdir(parents=True)
+    (out / "physical-hssim" / "model.pt").write_bytes(b"")  # weights without their log.json: not trained
     with pytest.raises(SystemExit) as e:
         main(["eval", "--out", str(out), "--data", str(data), "--runs", "physical-hssim,aperture-hssim",
               "--drbokeh", "/nonexistent/drbokeh"])
     message = str(e.value.code)
     assert message.startswith("eval: no run of physical-hssim, aperture-hssim is trained in") and str(out) in message
     assert "\n" not in message
-    assert not out.exists() and not data.exists()
+    assert sorted(p.name for p in out.rglob("*")) == ["model.pt", "physical-hssim"] and not data.exists()
 
 
 @pytest.mark.parametrize("cmd", [["train", "--runs", "supervised"], ["train", "--quick"], ["eval"], ["reproduce"]])
