@@ -555,6 +555,55 @@ def test_textured_mask_is_the_local_luminance_std():
     assert np.array_equal(got, want) and got[0].any() and not got[1].any()
 
 
+# ---- fine-tunes: a run that starts from another run's trained network ----------------------
+
+
+def test_a_finetune_starts_from_its_start_network_and_records_it(tmp_path):
+    """``RUN-from-START`` loads START's trained weights from the same output directory (at a
+    negligible rate its network stays START's), draws other batches than a run from scratch,
+    records its start, steps and rate in its log, and is evaluated like any run; a start that
+    is not trained there, or of another width, is a clear error."""
+    from drbokeh.dfdnet.evaluate import evaluate
+    from drbokeh.dfdnet.data import random_crops
+    from drbokeh.dfdnet.layers import make_layer
+    from drbokeh.dfdnet.train import (FINETUNE_SEED_OFFSET, TrainConfig, highlight_arrays, image_loss, load_model,
+                                      parse_run, predict, start_model, train_run)
+
+    splits = {"train": _tiny_split(1), "val": _tiny_split(2, 2), "test": _tiny_split(3, 2)}
+    cfg = TrainConfig(steps=3, batch=2, crop=32, base=4, eval_every=3, seed=5, finetune_steps=2)
+    start, still, moved = (parse_run(n) for n in ("gausspsf-l1g", "aperture-l1g-from-gausspsf-l1g",
+                                                  "physical-l1g-from-gausspsf-l1g"))
+    with pytest.raises(ValueError, match="gausspsf-l1g is not trained in"):
+        train_run(still, splits, cfg, tmp_path, log=lambda m: None)
+    train_run(start, splits, cfg, tmp_path, log=lambda m: None)
+    with pytest.raises(ValueError, match="trained with"):
+        start_model(tmp_path, start, TrainConfig(base=8))
+
+    x = splits["test"].aif
+    p_start = predict(load_model(tmp_path / start.name, cfg), x)
+    r = train_run(still, splits, TrainConfig(**{**cfg.__dict__, "finetune_lr": 1e-12}), tmp_path, log=lambda m: None)
+    assert (r["start"], r["config"]["steps"], r["config"]["lr"], r["config"]["seed"]) == (start.name, 2, 1e-12, 5)
+    assert len(r["curve"]) == 2
+    assert np.abs(predict(load_model(tmp_path / still.name, cfg), x) - p_start).max() < 1e-5
+    r2 = train_run(moved, splits, cfg, tmp_path, log=lambda m: None)
+    assert np.abs(predict(load_model(tmp_path / moved.name, cfg), x) - p_start).max() > 1e-4
+    # Its first batch is drawn from seed + FINETUNE_SEED_OFFSET: START's network on that batch
+    # gives the fine-tune's first loss (its weights had not moved yet).
+    rng = np.random.default_rng(5 + FINETUNE_SEED_OFFSET)
+    idx = rng.permutation(len(splits["train"]))[:2]
+    b = random_crops(splits["train"], idx, 32, rng, highlight_arrays(splits["train"], cfg.highlights), True)
+    start_net = load_model(tmp_path / start.name, cfg)
+    with torch.no_grad():
+        first = image_loss(make_layer("aperture"), "l1g", cfg, b, start_net(torch.from_numpy(b["aif"])))[0]
+    assert r["curve"][0]["loss"] == pytest.approx(float(first), rel=1e-5)
+    assert r2["config"]["seed"] == 5
+    res = evaluate(tmp_path, splits, [start, moved], cfg, html_scenes=1)
+    rows = {row["run"]: row for row in res["rows"]}
+    assert rows[moved.name]["steps"] == 2 and rows[moved.name]["seed"] == 5
+    assert rows[moved.name]["mae"] == pytest.approx(
+        float(np.abs(predict(load_model(tmp_path / moved.name, cfg), x) - splits["test"].disparity).mean()), abs=1e-6)
+
+
 # ---- the focus prior's warm-up in training ----------------------------------------------------
 
 

@@ -20,6 +20,38 @@ def test_run_names_round_trip():
     assert parse_run("physical-hssim-none").highlights == "none"
     with pytest.raises(ValueError, match="unknown run"):
         parse_run("physical-hssim-bright")
+    ft = parse_run("physical5-hssim-from-aperture-hssim")
+    assert (ft.layer, ft.loss, ft.start) == ("physical5", "hssim", parse_run("aperture-hssim"))
+    assert ft.name == "physical5-hssim-from-aperture-hssim" and parse_run(ft.name) == ft
+    for bad, why in (("supervised-from-aperture-hssim", "supervised"), ("physical5-hssim-from-supervised", "supervised"),
+                     ("physical5-hssim-from-aperture-hssim-from-gausspsf-hssim", "another fine-tune"),
+                     ("physical5-hssim-from-aperture", "unknown run")):
+        with pytest.raises(ValueError, match=why):
+            parse_run(bad)
+
+
+def test_a_finetune_takes_its_own_steps_and_rate_and_needs_its_start(tmp_path, capsys):
+    """``RUN-from-START`` trains ``--finetune-steps`` at ``--finetune-lr`` (the rest of the
+    configuration as given); ``train`` refuses one whose start is neither trained in --out nor
+    among the runs, in one line, before any tracing."""
+    from drbokeh.dfdnet.__main__ import _cfg, main, parse_args
+    from drbokeh.dfdnet.train import parse_run
+
+    cfg = _cfg(parse_args(["train", "--out", "o", "--steps", "300", "--lr", "0.004",
+                           "--finetune-steps", "40", "--finetune-lr", "0.0005"]))
+    run = parse_run("physical5-hssim-from-aperture-hssim").config(cfg)
+    assert (run.steps, run.lr, run.finetune_steps) == (40, 0.0005, 40)
+    assert (parse_run("aperture-hssim").config(cfg).steps, parse_run("aperture-hssim").config(cfg).lr) == (300, 0.004)
+    for bad in (["--finetune-steps", "0"], ["--finetune-lr", "-1"]):
+        with pytest.raises(SystemExit):
+            parse_args(["train", "--out", "o", *bad])
+    capsys.readouterr()
+    out, data = tmp_path / "o", tmp_path / "data"
+    with pytest.raises(SystemExit) as e:
+        main(["train", "--out", str(out), "--data", str(data), "--runs", "physical5-hssim-from-aperture-hssim"])
+    msg = str(e.value)
+    assert "starts from aperture-hssim, which is neither trained in" in msg and "\n" not in msg
+    assert not data.exists() and not out.exists()  # nothing traced, nothing written
 
 
 def test_unset_options_take_the_table_protocol_or_quick_settings():

@@ -199,7 +199,13 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "(default: everywhere; e.g. 1; session 24: docs/dfdnet.md)")
     p.add_argument("--jobs", type=_count_arg, default=2, help="runs trained at once, one process each (default 2); results do not depend on it")
     p.add_argument("--runs", help="comma-separated runs (LAYER-LOSS or supervised; layers: " + ", ".join(LAYERS)
-                   + "; losses: " + ", ".join(LOSSES) + "); default: the table: " + ",".join(r.name for r in TABLE_RUNS))
+                   + "; losses: " + ", ".join(LOSSES) + "; or a fine-tune RUN-from-START, e.g. "
+                   "physical5-hssim-from-aperture-hssim: START's trained network, --finetune-steps more through RUN's "
+                   "layer and loss; START is trained first); default: the table: " + ",".join(r.name for r in TABLE_RUNS))
+    p.add_argument("--finetune-steps", type=_count_arg, default=TrainConfig.finetune_steps, metavar="STEPS",
+                   help=f"steps of a fine-tune RUN-from-START (default {TrainConfig.finetune_steps}; session 35: docs/dfdnet.md)")
+    p.add_argument("--finetune-lr", type=_rate_arg, default=TrainConfig.finetune_lr, metavar="RATE",
+                   help=f"a fine-tune's learning rate, cosine to 5 %% of it (default {TrainConfig.finetune_lr:g})")
 
 
 def _specs(a: argparse.Namespace) -> List[SplitSpec]:
@@ -214,7 +220,8 @@ def _cfg(a: argparse.Namespace) -> TrainConfig:
         raise SystemExit(f"--crop {a.crop}: must be a multiple of 16 and at most --size {a.size}")
     return TrainConfig(steps=a.steps, batch=a.batch, crop=a.crop, base=a.base, lr=a.lr, seed=a.seed, threads=a.threads,
                        highlights=a.highlights, init_disparity=a.init_disparity, inputs=a.inputs,
-                       vertical_flips=not a.perspective, **_prior_fields(a))
+                       vertical_flips=not a.perspective, finetune_steps=a.finetune_steps, finetune_lr=a.finetune_lr,
+                       **_prior_fields(a))
 
 
 def _prior_fields(a: argparse.Namespace) -> Dict[str, Any]:
@@ -255,16 +262,31 @@ def _splits(a: argparse.Namespace, only: Optional[Sequence[str]] = None) -> Dict
 
 
 def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
-    a.out.mkdir(parents=True, exist_ok=True)
-    splits = _splits(a)
-    (a.out / "config.json").write_text(json.dumps(
-        {"train": asdict(cfg), "splits": [s.__dict__ for s in _specs(a)], "min_blur_px": a.min_blur}, indent=1))
     todo = []
     for spec in runs:
         if existing(a.out, spec) is not None and not a.retrain:
             _log(f"{spec.name}: already trained in {a.out / spec.name} (--retrain to redo)")
         else:
             todo.append(spec)
+    # Runs from scratch first, then the fine-tunes, whose starts must be trained by then
+    # (checked before any tracing).
+    fresh = [spec for spec in todo if spec.start is None]
+    finetunes = [spec for spec in todo if spec.start is not None]
+    for spec in finetunes:
+        assert spec.start is not None
+        if spec.start not in fresh and existing(a.out, spec.start) is None:
+            raise SystemExit(f"--runs: {spec.name} starts from {spec.start.name}, which is neither trained in "
+                             f"{a.out} nor among the runs: add {spec.start.name} to --runs")
+    a.out.mkdir(parents=True, exist_ok=True)
+    splits = _splits(a)
+    (a.out / "config.json").write_text(json.dumps(
+        {"train": asdict(cfg), "splits": [s.__dict__ for s in _specs(a)], "min_blur_px": a.min_blur}, indent=1))
+    for group in (fresh, finetunes):
+        _train_group(a, group, splits, cfg)
+
+
+def _train_group(a: argparse.Namespace, todo: List[RunSpec], splits: Dict[str, Split], cfg: TrainConfig) -> None:
+    """Trains ``todo``, ``--jobs`` at once (one process each), the longest first."""
     if a.jobs <= 1 or len(todo) <= 1:
         for spec in todo:
             train_logged(spec, splits, cfg, a.out)

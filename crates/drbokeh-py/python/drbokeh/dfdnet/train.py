@@ -30,24 +30,42 @@ HIGHLIGHTS = ("none", "reach", "energy", "energy+reach")
 INPUTS = ("aif", "aif+bokeh")
 
 
+# A fine-tune's name: ``LAYER-LOSS-from-START`` (``physical5-hssim-from-aperture-hssim``).
+FROM = "-from-"
+
+# A fine-tune draws its batches from ``seed + FINETUNE_SEED_OFFSET``, so that it does not see
+# its start's first batches again in the same order.
+FINETUNE_SEED_OFFSET = 1000
+
+
 @dataclass(frozen=True)
 class RunSpec:
     """``layer`` is a rendering layer (``layers.LAYERS``) or ``supervised``; ``loss`` one of
     ``losses.LOSSES`` (ignored when supervised: L1 on the true disparity); ``highlights``
-    overrides ``TrainConfig.highlights`` for this run (the highlight ablation)."""
+    overrides ``TrainConfig.highlights`` for this run (the highlight ablation). ``start``:
+    the run whose trained weights this one starts from (a fine-tune of
+    ``TrainConfig.finetune_steps`` at ``finetune_lr``; session 35, docs/dfdnet.md), trained
+    first in the same output directory; ``None``: a fresh network."""
 
     layer: str
     loss: str = "hssim"
     highlights: Optional[str] = None
+    start: Optional["RunSpec"] = None
 
     @property
     def name(self) -> str:
         if self.layer == "supervised":
             return "supervised"
-        return f"{self.layer}-{self.loss}" + (f"-{self.highlights}" if self.highlights else "")
+        own = f"{self.layer}-{self.loss}" + (f"-{self.highlights}" if self.highlights else "")
+        return own if self.start is None else own + FROM + self.start.name
 
     def config(self, cfg: "TrainConfig") -> "TrainConfig":
-        return cfg if self.highlights is None else replace(cfg, highlights=self.highlights)
+        """``cfg`` as this run trains: its highlight mode, and a fine-tune's steps and rate."""
+        if self.highlights is not None:
+            cfg = replace(cfg, highlights=self.highlights)
+        if self.start is not None:
+            cfg = replace(cfg, steps=cfg.finetune_steps, lr=cfg.finetune_lr)
+        return cfg
 
 
 # The table: the four layers with L1+G+HSSIM, `physical` through the prediction's layer
@@ -88,6 +106,17 @@ def longest_first(runs: List[RunSpec]) -> List[RunSpec]:
 
 
 def parse_run(name: str) -> RunSpec:
+    """The run named ``name``: ``LAYER-LOSS``, ``LAYER-LOSS-HIGHLIGHTS``, ``supervised``, or a
+    fine-tune ``RUN-from-START`` (both layer runs; a start is itself trained from scratch, and
+    never the supervised network, whose weights have seen the true depth)."""
+    if FROM in name:
+        own, start = name.split(FROM, 1)
+        if own == "supervised" or start == "supervised":
+            raise ValueError(f"run {name!r}: a fine-tune is trained through a layer, and starts from a run trained "
+                             "through one (the supervised network has seen the true depth)")
+        if FROM in start:
+            raise ValueError(f"run {name!r}: a fine-tune starts from a run trained from scratch, not from another fine-tune")
+        return replace(parse_run(own), start=parse_run(start))
     if name == "supervised":
         return RunSpec("supervised")
     parts = name.split("-")
@@ -149,6 +178,10 @@ class TrainConfig:
     # ground (``--perspective``), whose height in the frame is a depth cue that a flip
     # would invert (session 26, docs/dfdnet.md).
     vertical_flips: bool = True
+    # A fine-tune (``RunSpec.start``): its steps, and its learning rate (cosine to 5 % of it, as
+    # a run from scratch). Session 35 (docs/dfdnet.md): 500 at 0.001 from the aperture network.
+    finetune_steps: int = 500
+    finetune_lr: float = 1e-3
 
     def __post_init__(self) -> None:
         if self.inputs not in INPUTS:
@@ -289,11 +322,11 @@ def train_run(
     train, val = splits["train"], splits["val"]
     run_dir = out_dir / spec.name
     run_dir.mkdir(parents=True, exist_ok=True)
-    model = new_model(cfg)
+    model = new_model(cfg) if spec.start is None else start_model(out_dir, spec.start, cfg)
     layer = None if spec.layer == "supervised" else make_layer(spec.layer, cfg.threads)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
-    rng = np.random.default_rng(cfg.seed)
+    rng = np.random.default_rng(cfg.seed + (0 if spec.start is None else FINETUNE_SEED_OFFSET))
     extra = highlight_arrays(train, cfg.highlights) if layer is not None else {}
     curve: List[Dict[str, float]] = []
     val_curve: List[Dict[str, float]] = []
@@ -331,6 +364,7 @@ def train_run(
         "run": spec.name,
         "layer": spec.layer,
         "loss": spec.loss if spec.layer != "supervised" else "disparity L1",
+        "start": None if spec.start is None else spec.start.name,
         "config": asdict(cfg),
         "parameters": parameter_count(model),
         "train_scenes": n,
@@ -390,6 +424,20 @@ def load_model(run_dir: Path, cfg: TrainConfig) -> UNet:
     model = UNet(cfg.base, cfg.in_channels)
     model.load_state_dict(torch.load(run_dir / "model.pt", weights_only=True))
     return model
+
+
+def start_model(out_dir: Path, start: RunSpec, cfg: TrainConfig) -> UNet:
+    """The trained network of run ``start`` in ``out_dir``, for a fine-tune with ``cfg``;
+    an error (``ValueError``) if it is not trained there, or with another width or input."""
+    log = existing(out_dir, start)
+    if log is None:
+        raise ValueError(f"{start.name} is not trained in {out_dir}: a fine-tune starts from its weights "
+                         f"(train it first, e.g. --runs {start.name},...)")
+    theirs = {"base": log["config"].get("base"), "inputs": log["config"].get("inputs", "aif")}
+    mine = {"base": cfg.base, "inputs": cfg.inputs}
+    if theirs != mine:
+        raise ValueError(f"{out_dir / start.name} was trained with {theirs}, this fine-tune with {mine}")
+    return load_model(out_dir / start.name, cfg)
 
 
 def existing(out_dir: Path, spec: RunSpec) -> Optional[Dict[str, Any]]:
