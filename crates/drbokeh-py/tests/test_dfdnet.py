@@ -604,6 +604,23 @@ def test_a_finetune_starts_from_its_start_network_and_records_it(tmp_path):
         float(np.abs(predict(load_model(tmp_path / moved.name, cfg), x) - splits["test"].disparity).mean()), abs=1e-6)
 
 
+def test_train_trains_the_starts_before_their_finetunes(tmp_path, monkeypatch):
+    """``train --runs`` with a fine-tune listed before its start trains the start first, then
+    the fine-tune from it (the data here: tiny splits instead of traced ones)."""
+    import drbokeh.dfdnet.__main__ as cli
+
+    splits = {"train": _tiny_split(1), "val": _tiny_split(2, 2), "test": _tiny_split(3, 2)}
+    monkeypatch.setattr(cli, "_splits", lambda a, only=None: splits)
+    out = tmp_path / "o"
+    cli.main(["train", "--out", str(out), "--runs", "physical-l1g-from-gausspsf-l1g,gausspsf-l1g", "--size", "32",
+              "--crop", "32", "--batch", "2", "--base", "4", "--steps", "2", "--finetune-steps", "1", "--jobs", "1"])
+    start = json.loads((out / "gausspsf-l1g" / "log.json").read_text())
+    ft = json.loads((out / "physical-l1g-from-gausspsf-l1g" / "log.json").read_text())
+    assert (start["start"], len(start["curve"])) == (None, 2)
+    assert (ft["start"], len(ft["curve"]), ft["config"]["lr"]) == ("gausspsf-l1g", 1, 1e-3)
+    assert json.loads((out / "config.json").read_text())["train"]["finetune_steps"] == 1
+
+
 # ---- the focus prior's warm-up in training ----------------------------------------------------
 
 
