@@ -649,3 +649,57 @@ def test_focus_prior_warmup_falls_linearly_to_the_prior_and_training_follows_it(
     assert [c["focus_weight"] for c in r["curve"]] == pytest.approx([5.0, 3.0, 1.0, 1.0])
     for c in r["curve"]:  # the step's loss holds the prior at that step's weight
         assert c["loss"] == pytest.approx(0.5 * c["l1"] + 0.5 * c["g"] + c["focus_weight"] * c["focus"], rel=1e-5)
+
+
+def test_a_start_trained_again_makes_its_finetunes_stale_and_a_bad_start_is_one_line(tmp_path, monkeypatch, capsys):
+    """A fine-tune records its start's weights (``start_digest``). When the start is trained
+    again, ``train`` names each fine-tune of it left in --out as stale, trains one that is
+    in --runs again (without --retrain), and ``eval`` refuses a stale one in one line before
+    any tracing. A start of another width is refused in one line before any tracing too."""
+    import drbokeh.dfdnet.__main__ as cli
+    from drbokeh.dfdnet.train import weights_digest
+
+    splits = {"train": _tiny_split(1), "val": _tiny_split(2, 2), "test": _tiny_split(3, 2)}
+    monkeypatch.setattr(cli, "_splits", lambda a, only=None: splits)
+    out = tmp_path / "o"
+    small = ["--size", "32", "--crop", "32", "--batch", "2", "--base", "4", "--steps", "2", "--finetune-steps", "1",
+             "--jobs", "1"]
+    start, phys, aper = "gausspsf-l1g", "physical-l1g-from-gausspsf-l1g", "aperture-l1g-from-gausspsf-l1g"
+
+    def log(run):
+        return json.loads((out / run / "log.json").read_text())
+
+    cli.main(["train", "--out", str(out), "--runs", f"{start},{phys},{aper}", *small])
+    first = weights_digest(out / start)
+    assert log(phys)["start_digest"] == log(aper)["start_digest"] == first
+    assert log(start)["start_digest"] is None
+
+    def untraced(a, only=None):
+        raise AssertionError("traced before the check")
+
+    monkeypatch.setattr(cli, "_splits", untraced)
+    with pytest.raises(SystemExit) as e:  # the start has base 4
+        cli.main(["train", "--out", str(out), "--runs", phys, "--retrain", *small[:-6], "--base", "8", *small[-4:]])
+    assert "was trained with" in str(e.value) and "'base': 4" in str(e.value) and "\n" not in str(e.value)
+    assert log(phys)["start_digest"] == first  # nothing trained
+
+    monkeypatch.setattr(cli, "_splits", lambda a, only=None: splits)
+    capsys.readouterr()
+    cli.main(["train", "--out", str(out), "--runs", start, "--retrain", "--seed", "6", *small])
+    second = weights_digest(out / start)
+    assert second != first
+    said = capsys.readouterr().out
+    assert f"note: {phys} in {out} was fine-tuned from an earlier {start}" in said and aper in said
+
+    monkeypatch.setattr(cli, "_splits", untraced)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["eval", "--out", str(out), "--runs", f"{start},{aper}", "--size", "32"])
+    assert f"{aper} in {out} was fine-tuned from an earlier {start}" in str(e.value) and "\n" not in str(e.value)
+
+    monkeypatch.setattr(cli, "_splits", lambda a, only=None: splits)
+    cli.main(["train", "--out", str(out), "--runs", phys, "--seed", "6", *small])  # no --retrain
+    assert "trained again" in capsys.readouterr().out
+    assert log(phys)["start_digest"] == second and log(aper)["start_digest"] == first
+    cli.main(["eval", "--out", str(out), "--runs", f"{start},{phys}", "--size", "32"])
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert {r["run"] for r in rows} >= {start, phys}

@@ -30,7 +30,8 @@ from .data import FOCUS, Split, SplitSpec, check_min_blur, default_splits, prepa
 from .evaluate import evaluate, metrics
 from .layers import LAYERS
 from .losses import LOSSES
-from .train import HIGHLIGHTS, INPUTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, longest_first, new_model, parse_run, predict, train_logged, train_run
+from .train import (FROM, HIGHLIGHTS, INPUTS, split_loss, TABLE_RUNS, RunSpec, TrainConfig, existing, log_line, longest_first,
+                    new_model, parse_run, predict, stale_start, start_problem, train_logged, train_run)
 
 
 _log = log_line
@@ -262,27 +263,60 @@ def _splits(a: argparse.Namespace, only: Optional[Sequence[str]] = None) -> Dict
 
 
 def _train(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig) -> None:
-    todo = []
+    """Trains the runs not yet trained in --out (all of them with --retrain): the runs from
+    scratch first, then the fine-tunes, whose starts must be trained by then. A fine-tune
+    whose start is trained again now, or was since it was fine-tuned, is trained again too.
+    Every fine-tune's start is checked before any tracing (one line if it cannot be one)."""
+    fresh = [spec for spec in runs if spec.start is None and (a.retrain or existing(a.out, spec) is None)]
+    finetunes = []
     for spec in runs:
-        if existing(a.out, spec) is not None and not a.retrain:
-            _log(f"{spec.name}: already trained in {a.out / spec.name} (--retrain to redo)")
+        if spec.start is None:
+            if spec not in fresh:
+                _log(f"{spec.name}: already trained in {a.out / spec.name} (--retrain to redo)")
+            continue
+        stale = "its start is trained again now" if spec.start in fresh else stale_start(a.out, spec)
+        if a.retrain or existing(a.out, spec) is None:
+            finetunes.append(spec)
+        elif stale is not None:
+            _log(f"{spec.name}: trained again: {stale}")
+            finetunes.append(spec)
         else:
-            todo.append(spec)
-    # Runs from scratch first, then the fine-tunes, whose starts must be trained by then
-    # (checked before any tracing).
-    fresh = [spec for spec in todo if spec.start is None]
-    finetunes = [spec for spec in todo if spec.start is not None]
+            _log(f"{spec.name}: already trained in {a.out / spec.name} (--retrain to redo)")
     for spec in finetunes:
         assert spec.start is not None
-        if spec.start not in fresh and existing(a.out, spec.start) is None:
-            raise SystemExit(f"--runs: {spec.name} starts from {spec.start.name}, which is neither trained in "
-                             f"{a.out} nor among the runs: add {spec.start.name} to --runs")
+        if spec.start not in fresh:
+            if existing(a.out, spec.start) is None:
+                raise SystemExit(f"--runs: {spec.name} starts from {spec.start.name}, which is neither trained in "
+                                 f"{a.out} nor among the runs: add {spec.start.name} to --runs")
+            problem = start_problem(a.out, spec.start, cfg)
+            if problem is not None:
+                raise SystemExit(f"--runs: {spec.name}: {problem}")
     a.out.mkdir(parents=True, exist_ok=True)
     splits = _splits(a)
     (a.out / "config.json").write_text(json.dumps(
         {"train": asdict(cfg), "splits": [s.__dict__ for s in _specs(a)], "min_blur_px": a.min_blur}, indent=1))
     for group in (fresh, finetunes):
         _train_group(a, group, splits, cfg)
+    # Fine-tunes in --out that were not asked for and whose start was just trained again.
+    for spec in _trained_finetunes(a.out):
+        if spec not in runs:
+            stale = stale_start(a.out, spec)
+            if stale is not None:
+                _log(f"note: {stale}")
+
+
+def _trained_finetunes(out: Path) -> List[RunSpec]:
+    """The fine-tunes trained in ``out`` (directories named ``RUN-from-START`` with a model)."""
+    found = []
+    for d in sorted(out.iterdir()) if out.is_dir() else []:
+        if FROM in d.name:
+            try:
+                spec = parse_run(d.name)
+            except ValueError:
+                continue
+            if existing(out, spec) is not None:
+                found.append(spec)
+    return found
 
 
 def _train_group(a: argparse.Namespace, todo: List[RunSpec], splits: Dict[str, Split], cfg: TrainConfig) -> None:
@@ -350,6 +384,10 @@ def _eval(a: argparse.Namespace, runs: List[RunSpec], cfg: TrainConfig, exclusio
                          f"{a.out}/RUN/model.pt: give eval the --out that train had)")
     if missing:
         _log(f"eval: not trained in {a.out}, left out: {', '.join(missing)}")
+    for spec in runs:
+        stale = stale_start(a.out, spec)
+        if stale is not None:
+            raise SystemExit(f"eval: {stale}")
     splits = _splits(a, only=("test",))
     left_out = ""
     if exclusion is not None:
@@ -433,7 +471,8 @@ def _quick(a: argparse.Namespace) -> None:
     _log(json.dumps(out))
 
 
-RETRAIN_HELP = "train runs again even if DIR has them"
+RETRAIN_HELP = ("train runs again even if DIR has them (a fine-tune RUN-from-START is trained again anyway when "
+                "START is, now or since)")
 NOTE_HELP = "a line put above the table (e.g. what is reduced)"
 EXCLUDE_HELP = ("score only the test scenes whose layouts are not in DIR's test set (DIR: an eval output of the same "
                 "test seed, e.g. a smaller --test-scenes that choices were made on); scenes match by index")

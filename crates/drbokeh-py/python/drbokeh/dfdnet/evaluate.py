@@ -34,7 +34,7 @@ import numpy as np
 
 from .data import Split
 from .report import smooth, svg_lines, upscale, write_png
-from .train import RunSpec, TrainConfig, existing, load_model, new_model, predict, scene_losses
+from .train import RunSpec, TrainConfig, existing, load_model, new_model, predict, scene_losses, started_from
 
 
 def depth_mm(disparity: np.ndarray, near_mm: np.ndarray, far_mm: np.ndarray) -> np.ndarray:
@@ -101,17 +101,6 @@ def constant_guess(split: Split) -> np.ndarray:
 
 def _fmt(v: float, digits: int = 4) -> str:
     return "-" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
-
-
-def started_from(log_config: Dict[str, Any], cfg: TrainConfig) -> TrainConfig:
-    """``cfg`` with the seed, U-Net width, initial disparity and network input a run's log
-    records (what its network was before training); ``cfg``'s values where an older log
-    lacks one (logs from before the input option: the all-in-focus image)."""
-    init = log_config.get("init_disparity", cfg.init_disparity)
-    return replace(cfg, seed=int(log_config.get("seed", cfg.seed)),
-                   base=int(log_config.get("base", cfg.base)),
-                   init_disparity=None if init is None else float(init),
-                   inputs=str(log_config.get("inputs", "aif")))
 
 
 # The ``TrainConfig`` fields that make up a run's training loss (``image_loss``).

@@ -5,6 +5,7 @@ optimiser and schedule."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import time
@@ -323,6 +324,7 @@ def train_run(
     run_dir = out_dir / spec.name
     run_dir.mkdir(parents=True, exist_ok=True)
     model = new_model(cfg) if spec.start is None else start_model(out_dir, spec.start, cfg)
+    start_digest = None if spec.start is None else weights_digest(out_dir / spec.start.name)
     layer = None if spec.layer == "supervised" else make_layer(spec.layer, cfg.threads)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.steps, eta_min=cfg.lr * 0.05)
@@ -365,6 +367,9 @@ def train_run(
         "layer": spec.layer,
         "loss": spec.loss if spec.layer != "supervised" else "disparity L1",
         "start": None if spec.start is None else spec.start.name,
+        # The start's weights (:func:`weights_digest`), so that a later --retrain of the start
+        # shows this run to be stale (:func:`stale_start`).
+        "start_digest": start_digest,
         "config": asdict(cfg),
         "parameters": parameter_count(model),
         "train_scenes": n,
@@ -426,18 +431,68 @@ def load_model(run_dir: Path, cfg: TrainConfig) -> UNet:
     return model
 
 
-def start_model(out_dir: Path, start: RunSpec, cfg: TrainConfig) -> UNet:
-    """The trained network of run ``start`` in ``out_dir``, for a fine-tune with ``cfg``;
-    an error (``ValueError``) if it is not trained there, or with another width or input."""
+def started_from(log_config: Dict[str, Any], cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` with the seed, U-Net width, initial disparity and network input a run's log
+    records (what its network was before training); ``cfg``'s values where an older log
+    lacks one (logs from before the input option: the all-in-focus image)."""
+    init = log_config.get("init_disparity", cfg.init_disparity)
+    return replace(cfg, seed=int(log_config.get("seed", cfg.seed)),
+                   base=int(log_config.get("base", cfg.base)),
+                   init_disparity=None if init is None else float(init),
+                   inputs=str(log_config.get("inputs", "aif")))
+
+
+def start_problem(out_dir: Path, start: RunSpec, cfg: TrainConfig) -> Optional[str]:
+    """Why run ``start`` in ``out_dir`` cannot start a fine-tune with ``cfg`` (not trained
+    there, or its network has another width or input), in one line; ``None`` if it can."""
     log = existing(out_dir, start)
     if log is None:
-        raise ValueError(f"{start.name} is not trained in {out_dir}: a fine-tune starts from its weights "
-                         f"(train it first, e.g. --runs {start.name},...)")
-    theirs = {"base": log["config"].get("base"), "inputs": log["config"].get("inputs", "aif")}
-    mine = {"base": cfg.base, "inputs": cfg.inputs}
+        return (f"{start.name} is not trained in {out_dir}: a fine-tune starts from its weights "
+                f"(train it first, e.g. --runs {start.name},...)")
+    was = started_from(log["config"], cfg)
+    theirs, mine = {"base": was.base, "inputs": was.inputs}, {"base": cfg.base, "inputs": cfg.inputs}
     if theirs != mine:
-        raise ValueError(f"{out_dir / start.name} was trained with {theirs}, this fine-tune with {mine}")
+        return f"{out_dir / start.name} was trained with {theirs}, this fine-tune with {mine}"
+    return None
+
+
+def start_model(out_dir: Path, start: RunSpec, cfg: TrainConfig) -> UNet:
+    """The trained network of run ``start`` in ``out_dir``, for a fine-tune with ``cfg``;
+    an error (``ValueError``, :func:`start_problem`'s line) if it cannot be one."""
+    problem = start_problem(out_dir, start, cfg)
+    if problem is not None:
+        raise ValueError(problem)
     return load_model(out_dir / start.name, cfg)
+
+
+def weights_digest(run_dir: Path) -> str:
+    """A SHA-256 of a trained network's weights (``run_dir/model.pt``): each tensor's name,
+    shape, type and values in the state dict's order, so that it names the weights and not
+    the file's packing."""
+    h = hashlib.sha256()
+    for name, t in torch.load(run_dir / "model.pt", weights_only=True).items():
+        a = t.detach().cpu().contiguous().numpy()
+        h.update(f"{name}:{a.dtype}:{a.shape};".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def stale_start(out_dir: Path, spec: RunSpec) -> Optional[str]:
+    """For a fine-tune trained in ``out_dir``: why its network no longer follows from its
+    start there (the start was trained again since), in one line; ``None`` if
+    it does, if ``spec`` is not a trained fine-tune, if its start is not in ``out_dir``, or
+    if its log predates the start's digest (``start_digest``)."""
+    if spec.start is None:
+        return None
+    log = existing(out_dir, spec)
+    if log is None or log.get("start_digest") is None:
+        return None
+    if existing(out_dir, spec.start) is None:  # e.g. an eval directory that links the fine-tune alone
+        return None
+    if weights_digest(out_dir / spec.start.name) != log["start_digest"]:
+        return (f"{spec.name} in {out_dir} was fine-tuned from an earlier {spec.start.name} (trained again since): "
+                f"train it again (--runs {spec.name} --retrain)")
+    return None
 
 
 def existing(out_dir: Path, spec: RunSpec) -> Optional[Dict[str, Any]]:
