@@ -498,7 +498,9 @@ and DIR/RUN/log.json; the data is traced into --data (default DIR/data) once and
 
 Evaluates the runs trained in DIR on the test split: DIR/results.md and results.json,
 DIR/index.html with the test images, DIR/plots/*.svg (loss curves, validation MAE).
-It reads only the test split of --data, and traces only that split if it is missing.""",
+It reads only the test split of --data, and traces only that split if it is missing.
+A fine-tune RUN-from-START whose START was trained again since is refused (its log records
+the start's weights): train it again first (train --runs RUN-from-START).""",
     "table": """examples:
   python -m drbokeh.dfdnet table R17 R18 R19 -o T     # R17..R19: eval outputs of seeds 17-19
   python -m drbokeh.dfdnet table P17 P18 -o T2         # two seeds are enough to run it
